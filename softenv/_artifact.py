@@ -1,0 +1,77 @@
+"""Versioned, pickle-free ``.npz`` artifacts with atomic saving.
+
+Every file softenv writes is an ``.npz`` holding plain arrays plus one JSON string under
+``__meta__`` with the artifact's ``kind`` and ``format_version``. Loading never enables pickle and
+checks kind and version before anything else is read, so a corrupt, foreign or stale file fails with
+a message naming the file, what was found and what was expected.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_META_KEY = "__meta__"
+
+
+def save_artifact(path: str | os.PathLike, kind: str, version: int,
+                  arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
+    """Write ``arrays`` and ``meta`` to ``path`` atomically (temporary file, then rename)."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise ValueError(f"path must end in .npz, got {str(path)!r}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = dict(meta, kind=kind, format_version=int(version))
+    payload = {name: np.asarray(a) for name, a in arrays.items()}
+    for name, a in payload.items():
+        if a.dtype.kind == "O":
+            raise ValueError(f"artifact array {name!r} has dtype object, which cannot be saved without pickle")
+    payload[_META_KEY] = np.array(json.dumps(header, sort_keys=True))
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            np.savez(handle, **payload)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read an artifact written by :func:`save_artifact`, checking its kind and format version."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"path {str(path)!r} does not exist or is not a file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if _META_KEY not in data.files:
+                raise ValueError(f"{str(path)!r} is not a softenv artifact (no {_META_KEY!r} entry)")
+            meta = json.loads(str(data[_META_KEY][()]))
+            arrays = {name: data[name] for name in data.files if name != _META_KEY}
+    except (zipfile.BadZipFile, OSError, EOFError, json.JSONDecodeError, KeyError) as exc:
+        raise ValueError(f"{str(path)!r} is corrupt or not an .npz artifact: {exc}") from exc
+    except ValueError as exc:
+        if "softenv artifact" in str(exc):
+            raise
+        raise ValueError(f"{str(path)!r} could not be read without pickle: {exc}") from exc
+    found_kind, found_version = meta.get("kind"), meta.get("format_version")
+    if found_kind != kind:
+        raise ValueError(f"{str(path)!r} holds a {found_kind!r} artifact; expected {kind!r}")
+    if found_version != version:
+        raise ValueError(f"{str(path)!r} has format_version={found_version!r}; this softenv reads "
+                         f"{kind!r} format_version={version} only (re-create the file)")
+    return arrays, meta
+
+
+def require_arrays(arrays: dict[str, np.ndarray], names: list[str], path: str | os.PathLike) -> None:
+    """Raise if an artifact lacks one of the arrays its loader needs."""
+    missing = [n for n in names if n not in arrays]
+    if missing:
+        raise ValueError(f"{str(path)!r} is missing arrays {missing}; the file is corrupt or incomplete")
