@@ -91,5 +91,5 @@ def check_finite(arr: np.ndarray, name: str) -> None:
     if not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
         index = tuple(int(i) for i in bad)
-        raise ValueError(f"{name} must be finite; found {arr[index]!r} at index {index} "
+        raise ValueError(f"{name} must be finite; found {float(arr[index])!r} at index {index} "
                          f"(array of shape {arr.shape})")

@@ -180,6 +180,7 @@ class ShapeModel:
         must be a C-contiguous array of the result's shape and dtype. ``vertices`` (optional index
         array) decodes only those vertices: ``3 len(vertices)`` coordinates per shape.
         """
+        self._check_fitted()
         b = np.asarray(b)
         if b.dtype != np.float32 and b.dtype != np.float64:
             b = check_array(b, "b", ndim=(1, 2))

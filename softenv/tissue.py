@@ -42,9 +42,11 @@ drag (the crater's walls steepen the strain).
 
 Clinical scaling. A free 3 cm sphere at tongue stiffness (E ~ 8 kPa by MR elastography, Cheng 2011)
 would be indented far beyond its radius by laryngoscopy forces (peak ~40 N, Bucx 1992): Hertz gives
-d/R > 1. The small-strain solution is only meaningful for a dimensionless load
-``F (1 - nu^2) / (E R^2)`` of order 0.1, so softenv uses an **effective modulus**, chosen so that the
-design force gives a chosen indentation: ``E_eff = 2 (1 - nu^2) F_max / (pi a * f R)``. The default
+d/R > 1 (the dimensionless load ``F (1 - nu^2) / (E R^2)`` is ~4). The small-strain solution is
+only meaningful for indentations of a fraction of the radius, so softenv uses an **effective
+modulus**, chosen so that the design force gives a chosen indentation ``f R``:
+``E_eff = 2 (1 - nu^2) F_max / (pi a * f R)``, i.e. a dimensionless design load of ``pi a f / (2 R)``
+(0.31 by default). The default
 (``F_max = 40 N``, ``f = 0.4``, ``a = 15 mm``, ``R = 30 mm``, ``nu = 0.45``) gives
 ``E_eff ~ 113 kPa``, about 14 times the tongue's own modulus: the factor stands for the support and
 confinement of the tongue in the oral cavity, which a free sphere lacks. See :meth:`TissueParams.for_clinical_forces`.

@@ -1,0 +1,26 @@
+"""Test set-up: one BLAS/torch thread (2-core CI machines) and an isolated cache directory."""
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import tempfile  # noqa: E402
+
+import pytest  # noqa: E402
+
+_CACHE = tempfile.mkdtemp(prefix="softenv-test-cache-")
+os.environ["SOFTENV_CACHE_DIR"] = _CACHE
+
+try:  # torch is an optional extra; when present, keep it to one thread as well
+    import torch
+
+    torch.set_num_threads(1)
+except ImportError:  # pragma: no cover
+    pass
+
+
+@pytest.fixture(scope="session")
+def cache_dir() -> str:
+    return _CACHE
