@@ -87,9 +87,15 @@ def check_array(value: Any, name: str, *, ndim: int | tuple[int, ...] | None = N
 
 
 def check_finite(arr: np.ndarray, name: str) -> None:
-    """Raise if any entry is NaN or infinite, naming the first bad index and value."""
-    if not np.isfinite(arr).all():
-        bad = np.argwhere(~np.isfinite(arr))[0]
-        index = tuple(int(i) for i in bad)
-        raise ValueError(f"{name} must be finite; found {float(arr[index])!r} at index {index} "
-                         f"(array of shape {arr.shape})")
+    """Raise if any entry is NaN or infinite, naming the first bad index and value.
+
+    Large arrays are checked in blocks of rows, so the check needs little memory of its own.
+    """
+    step = max(1, (1 << 22) // max(1, arr[0].size)) if arr.ndim >= 2 else max(1, arr.shape[0] if arr.ndim else 1)
+    for start in range(0, arr.shape[0] if arr.ndim else 1, step):
+        block = arr[start:start + step] if arr.ndim else arr
+        if not np.isfinite(block).all():
+            bad = np.argwhere(~np.isfinite(block))[0]
+            index = (int(bad[0]) + start, *map(int, bad[1:])) if arr.ndim else ()
+            raise ValueError(f"{name} must be finite; found {float(arr[index])!r} at index {index} "
+                             f"(array of shape {arr.shape})")

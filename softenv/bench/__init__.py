@@ -1,0 +1,90 @@
+"""``softenv bench``: speed and memory targets, measured as medians with spreads, single-threaded,
+next to Gymnasium's CartPole-v1 measured in the same process. Writes ``perf.md`` and ``perf.json``."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+from .timing import Row, cartpole_steps_per_second, machine_info
+
+# section name -> (module, function); each function takes ``(quick, reference)`` -- the CartPole-v1
+# step timing of this run -- and returns rows
+SECTIONS: dict[str, tuple[str, str]] = {
+    "tissue": ("softenv.bench.shape", "bench_tissue"),
+    "decode": ("softenv.bench.shape", "bench_decode"),
+    "fit": ("softenv.bench.shape", "bench_fit"),
+}
+
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+
+
+def single_thread_environment() -> dict[str, str]:
+    """The current environment with BLAS/OpenMP pinned to one thread."""
+    env = dict(os.environ)
+    env.update({v: "1" for v in THREAD_VARS})
+    return env
+
+
+def threads_pinned() -> bool:
+    return all(os.environ.get(v) == "1" for v in THREAD_VARS)
+
+
+def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str = "softenv bench",
+        echo: Callable[[str], None] = print) -> list[Row]:
+    """Run the selected sections (all by default), print the table, write the reports."""
+    names = only or list(SECTIONS)
+    unknown = [n for n in names if n not in SECTIONS]
+    if unknown:
+        raise ValueError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")
+    started = time.perf_counter()
+    reference = cartpole_steps_per_second(40_000 if quick else 200_000)
+    rows = [Row("reference", "Gymnasium CartPole-v1 step via gym.make (pre-sampled actions)",
+                1.0 / reference.median, "steps/s",
+                f"IQR {1 / reference.p75:,.0f}-{1 / reference.p25:,.0f}")]
+    for name in names:
+        module, func = SECTIONS[name]
+        echo(f"bench: {name} ...")
+        section: Callable[..., list[Row]] = getattr(importlib.import_module(module), func)
+        try:
+            rows += section(quick, reference)
+        except ImportError as exc:  # an optional extra is missing: say so instead of failing the run
+            rows.append(Row(name, f"skipped: {exc}", float("nan"), "", target="install softenv[all]", ok=None))
+    elapsed = time.perf_counter() - started
+    table = format_table(rows)
+    echo(table)
+    write_report(rows, out_dir, command, quick, elapsed, table)
+    return rows
+
+
+def format_table(rows: list[Row]) -> str:
+    lines = ["| section | metric | median | spread | target | met |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        value = f"{r.value:,.3g}" if abs(r.value) < 1000 else f"{r.value:,.0f}"
+        met = "" if r.ok is None else ("yes" if r.ok else "**no**")
+        lines.append(f"| {r.section} | {r.metric} | {value} {r.unit} | {r.spread} | {r.target} | {met} |")
+    return "\n".join(lines)
+
+
+def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elapsed: float, table: str) -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    machine = machine_info()
+    stem = "perf_quick" if quick else "perf"
+    payload = {"command": command, "quick": quick, "elapsed_s": elapsed, "machine": machine,
+               "rows": [r.as_dict() for r in rows]}
+    (out_dir / f"{stem}.json").write_text(json.dumps(payload, indent=2, default=float) + "\n")
+    text = [f"# softenv performance{' (quick)' if quick else ''}", "",
+            f"Made by `{command}` in {elapsed:.0f} s. Single thread (BLAS/OpenMP pinned to 1); every time is the "
+            "median over repeats, with its interquartile range; CartPole-v1 was measured in the same process.", "",
+            "Machine: " + ", ".join(f"{k} {v}" for k, v in machine.items()), "", table, ""]
+    (out_dir / f"{stem}.md").write_text("\n".join(text))
+
+
+def reexec_single_threaded(argv: list[str]) -> None:
+    """Replace this process by ``python -m softenv ARGV`` with one BLAS thread (set before numpy loads)."""
+    os.execve(sys.executable, [sys.executable, "-m", "softenv", *argv], single_thread_environment())

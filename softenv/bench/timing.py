@@ -1,0 +1,121 @@
+"""Timing helpers for ``softenv bench``: repeated measurement, medians and spreads, machine facts."""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+
+@dataclass
+class Timing:
+    """Per-call times (seconds) over repeats: median, interquartile range, p99."""
+
+    samples: np.ndarray
+
+    @property
+    def median(self) -> float:
+        return float(np.median(self.samples))
+
+    @property
+    def p25(self) -> float:
+        return float(np.percentile(self.samples, 25))
+
+    @property
+    def p75(self) -> float:
+        return float(np.percentile(self.samples, 75))
+
+    @property
+    def p99(self) -> float:
+        return float(np.percentile(self.samples, 99))
+
+
+def measure(fn: Callable[[], Any], *, number: int = 1000, repeats: int = 15, warmup: int = 1) -> Timing:
+    """Time ``fn`` ``number`` times per repeat; return the per-call time of each repeat."""
+    for _ in range(warmup):
+        for _ in range(max(1, number // 10)):
+            fn()
+    samples = np.empty(repeats)
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        samples[r] = (time.perf_counter() - t0) / number
+    return Timing(samples)
+
+
+def measure_each(fn: Callable[[], Any], calls: int = 20000, warmup: int = 200) -> Timing:
+    """Time every single call (for tail latencies such as p99)."""
+    for _ in range(warmup):
+        fn()
+    samples = np.empty(calls)
+    clock = time.perf_counter
+    for i in range(calls):
+        t0 = clock()
+        fn()
+        samples[i] = clock() - t0
+    return Timing(samples)
+
+
+@dataclass
+class Row:
+    """One benchmark line: a measured value against its target."""
+
+    section: str
+    metric: str
+    value: float
+    unit: str
+    spread: str = ""
+    target: str = ""
+    ok: bool | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"section": self.section, "metric": self.metric, "value": self.value, "unit": self.unit,
+                "spread": self.spread, "target": self.target, "ok": self.ok, **self.extra}
+
+
+def spread_us(t: Timing) -> str:
+    return f"IQR {t.p25 * 1e6:.2f}-{t.p75 * 1e6:.2f} us"
+
+
+def machine_info() -> dict[str, Any]:
+    """What the numbers were measured on."""
+    cpu = platform.processor() or "unknown"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    import gymnasium
+
+    return {"cpu": cpu, "logical_cores": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "gymnasium": gymnasium.__version__, "platform": platform.platform(),
+            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
+
+
+def cartpole_steps_per_second(steps: int = 100_000, seed: int = 0) -> Timing:
+    """Gymnasium's CartPole-v1 through ``gym.make`` with pre-sampled actions: the in-process reference."""
+    import gymnasium as gym
+
+    env = gym.make("CartPole-v1")
+    env.reset(seed=seed)
+    actions = np.random.default_rng(seed).integers(0, 2, size=4096).tolist()
+    per_rep = steps // 5
+    samples = np.empty(5)
+    for r in range(5):
+        t0 = time.perf_counter()
+        for i in range(per_rep):
+            _, _, terminated, truncated, _ = env.step(actions[i & 4095])
+            if terminated or truncated:
+                env.reset()
+        samples[r] = (time.perf_counter() - t0) / per_rep
+    env.close()
+    return Timing(samples)

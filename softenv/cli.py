@@ -1,0 +1,130 @@
+"""The ``softenv`` command line: ``data``, ``fit``, ``bench`` (and, with the later parts, ``compare``, ``score``).
+
+Each subcommand has ``--help``. Errors in arguments or files end the command with a one-line message
+and exit status 2, not a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def _component_rule(text: str) -> int | float | str:
+    """``scree``/``kneedle``/``noise``, a variance fraction such as ``0.99``, or an int."""
+    if text in ("scree", "kneedle", "noise"):
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--components {text!r}: use scree, kneedle, noise, a fraction in (0, 1) or an int")
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"--components {text!r}: a variance fraction must lie in (0, 1)")
+    return value
+
+
+def cmd_data(args: argparse.Namespace) -> None:
+    from ._progress import Progress
+    from .datasets import paper_dataset
+
+    jobs = [(n, law) for law in args.laws for n in args.points]
+    print(f"{'data set':<34} {'rows':>5} {'coords':>7} {'noise (m)':>10}  file")
+    with Progress(len(jobs), "data") as bar:
+        for n, law in jobs:
+            d = paper_dataset(n, args.deformations, args.magnitudes, law=law, noise=args.noise, seed=args.seed)
+            where = "(cache)"
+            if args.out is not None:
+                path = Path(args.out) / f"{d.name}.npz"
+                d.save(path)
+                where = str(path)
+            bar.advance(note=d.name)
+            print(f"{d.name:<34} {d.n_samples:>5} {d.shapes.shape[1]:>7} {d.noise_std:>10.2g}  {where}")
+
+
+def cmd_fit(args: argparse.Namespace) -> None:
+    from .datasets import ForceShapeData, paper_dataset
+    from .shape_model import ShapeModel
+
+    data = (ForceShapeData.load(args.data) if args.data else
+            paper_dataset(args.points, args.deformations, args.magnitudes, law=args.law, noise=args.noise, seed=args.seed))
+    noise_std = args.noise_std if args.noise_std is not None else (data.noise_std or None)
+    model = ShapeModel(args.components, noise_std=noise_std).fit(data.shapes, data.mesh)
+    rmse = float(np.sqrt(np.mean((model.reconstruct(data.shapes) - data.shapes) ** 2)))
+    print(f"data: {data.name} ({data.n_samples} shapes x {data.shapes.shape[1]} coordinates)")
+    print(f"kept k = {model.n_components_} components by rule {model.rule_!r}")
+    print("what each rule picks: " + ", ".join(f"{r} {k}" for r, k in model.picks_.items()))
+    share = model.explained_variance_.sum() / model.total_variance_
+    print(f"explained variance {share:.6f}; reconstruction RMSE {rmse:.3g} m ({rmse * 1e3:.3g} mm)")
+    if args.out:
+        model.save(args.out)
+        print(f"saved {args.out}")
+
+
+def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
+    from . import bench
+
+    if not bench.threads_pinned():
+        bench.reexec_single_threaded(argv)
+    bench.run(args.quick, Path(args.out), args.only, command="softenv " + " ".join(argv))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def paper_args(p: argparse.ArgumentParser, many: bool) -> None:
+        if many:
+            p.add_argument("--points", type=int, nargs="+", default=[441, 961], help="surface points (square numbers)")
+            p.add_argument("--laws", nargs="+", default=["linear", "stiffening"], choices=["linear", "stiffening"])
+        else:
+            p.add_argument("--points", type=int, default=961, help="surface points (441 or 961 in the paper)")
+            p.add_argument("--law", default="linear", choices=["linear", "stiffening"])
+        p.add_argument("--deformations", type=int, default=10, help="contact points (paper: up to 10)")
+        p.add_argument("--magnitudes", type=int, default=11, help="force magnitudes per contact point (paper: 11)")
+        p.add_argument("--noise", type=float, default=1e-5, help="white-noise std as a fraction of the radius")
+        p.add_argument("--seed", type=int, default=0)
+
+    p = sub.add_parser("data", help="generate the paper's data sets (cached; --out writes copies)")
+    paper_args(p, many=True)
+    p.add_argument("--out", help="directory for .npz copies")
+
+    p = sub.add_parser("fit", help="fit a PCA shape model and report k, the rules' picks and the error")
+    paper_args(p, many=False)
+    p.add_argument("--data", help="a data set .npz written by 'softenv data --out' (instead of the paper set)")
+    p.add_argument("--components", type=_component_rule, default="scree",
+                   help="scree | kneedle | noise | variance fraction (0.99) | int")
+    p.add_argument("--noise-std", type=float, help="noise std in metres for the noise rule (default: the data's)")
+    p.add_argument("--out", help="write the model to this .npz")
+
+    p = sub.add_parser("bench", help="speed and memory benchmarks against CartPole-v1 (writes perf.md/.json)")
+    p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")
+    p.add_argument("--out", default="results", help="output directory (default: results)")
+    p.add_argument("--only", nargs="+", help="run only these sections")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "data":
+            cmd_data(args)
+        elif args.command == "fit":
+            cmd_fit(args)
+        elif args.command == "bench":
+            cmd_bench(args, argv)
+    except ValueError as exc:
+        print(f"softenv {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

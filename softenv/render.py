@@ -1,0 +1,164 @@
+"""Headless drawing of deformed spheres with matplotlib (imported only by code that renders).
+
+Surfaces are projected orthographically and painted back to front as a 2-D ``PolyCollection``
+(back faces culled, Lambert shading), which is several times faster than ``mplot3d`` and needs no
+display. :class:`SphereFigure` keeps one figure and updates it in place, for environment frames;
+:func:`draw_surface` draws once, for report figures.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.colors import LinearSegmentedColormap
+from matplotlib.figure import Figure
+
+# pale pink at rest, deep red where the tissue is displaced most
+TONGUE = LinearSegmentedColormap.from_list("softenv_tongue", ["#f6d3cf", "#e8909a", "#c0394e", "#6e0f26"])
+
+
+class View:
+    """Orthographic camera: ``elevation`` above the x-y plane and ``azimuth`` around z, in degrees."""
+
+    def __init__(self, elevation: float = 30.0, azimuth: float = -50.0) -> None:
+        el, az = math.radians(elevation), math.radians(azimuth)
+        forward = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])  # toward viewer
+        right = np.array([-math.sin(az), math.cos(az), 0.0])
+        up = np.cross(forward, right)
+        self.basis = np.stack([right, up, forward])  # rows: screen x, screen y, depth (toward viewer)
+        self.light = forward * 0.6 + up * 0.6 + right * 0.3
+        self.light /= np.linalg.norm(self.light)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(n, 3)`` world points -> ``(n, 3)`` screen x, screen y, depth."""
+        return points @ self.basis.T
+
+
+def shaded_faces(points: np.ndarray, triangles: np.ndarray, values: np.ndarray, view: View, cmap: Any,
+                 vmin: float, vmax: float) -> tuple[np.ndarray, np.ndarray]:
+    """Front-facing triangles in 2-D, back to front, and their shaded RGBA colours."""
+    screen = view.project(points)
+    tri = screen[triangles]                                   # (t, 3, 3)
+    world = points[triangles]
+    normal = np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0])
+    facing = normal @ view.basis[2] > 0
+    order = np.argsort(tri[facing, :, 2].mean(axis=1))
+    keep = np.flatnonzero(facing)[order]
+    unit = normal[keep] / np.maximum(np.linalg.norm(normal[keep], axis=1, keepdims=True), 1e-300)
+    lambert = 0.6 + 0.4 * np.clip(unit @ view.light, 0.0, 1.0)
+    face_value = values[triangles[keep]].mean(axis=1)
+    span = vmax - vmin if vmax > vmin else 1.0
+    rgba = cmap(np.clip((face_value - vmin) / span, 0.0, 1.0))
+    rgba[:, :3] *= lambert[:, None]
+    return tri[keep, :, :2], rgba
+
+
+def visible_edges(points: np.ndarray, triangles: np.ndarray, view: View) -> np.ndarray:
+    """2-D segments of the front-facing triangles' edges (a wireframe), ``(m, 2, 2)``."""
+    world = points[triangles]
+    normal = np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0])
+    front = triangles[normal @ view.basis[2] > 0]
+    edges = np.unique(np.sort(np.concatenate([front[:, [0, 1]], front[:, [1, 2]], front[:, [2, 0]]]), axis=1), axis=0)
+    screen = view.project(points)[:, :2]
+    return screen[edges]
+
+
+def draw_surface(ax: Any, points: np.ndarray, triangles: np.ndarray, values: np.ndarray, *, view: View | None = None,
+                 cmap: Any = TONGUE, vmin: float | None = None, vmax: float | None = None, limit: float | None = None,
+                 wireframe: np.ndarray | None = None, title: str | None = None) -> PolyCollection:
+    """Draw a surface (coloured by per-vertex ``values``) and optionally a wireframe of ``wireframe`` points."""
+    view = view or View()
+    vmin = float(values.min()) if vmin is None else vmin
+    vmax = float(values.max()) if vmax is None else vmax
+    cmap = matplotlib.colormaps[cmap] if isinstance(cmap, str) else cmap
+    polys, colors = shaded_faces(points, triangles, values, view, cmap, vmin, vmax)
+    coll = PolyCollection(polys, facecolors=colors, edgecolors="none", antialiaseds=False)
+    ax.add_collection(coll)
+    if wireframe is not None:
+        ax.add_collection(LineCollection(visible_edges(wireframe, triangles, view), colors="k", linewidths=0.3, alpha=0.5))
+    lim = limit if limit is not None else 1.15 * float(np.abs(points).max())
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    if title:
+        ax.set_title(title, fontsize=9)
+    return coll
+
+
+class SphereFigure:
+    """A reusable figure for environment frames: update the surface, target wireframe and force arrow.
+
+    Args:
+        triangles: the mesh's triangles.
+        radius: sphere radius (sets the view limits).
+        size_px: frame width and height in pixels.
+        max_displacement: displacement (m) at the top of the colour scale.
+    """
+
+    def __init__(self, triangles: np.ndarray, radius: float, size_px: int = 320, max_displacement: float | None = None,
+                 view: View | None = None, interactive: bool = False) -> None:
+        self.triangles = triangles
+        self.radius = radius
+        self.view = view or View()
+        self.vmax = max_displacement if max_displacement is not None else 0.4 * radius
+        self.cmap = TONGUE
+        dpi = 100
+        if interactive:
+            self.figure = plt.figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+        else:
+            self.figure = Figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+            FigureCanvasAgg(self.figure)
+        self.ax = self.figure.add_axes((0, 0, 1, 1))
+        lim = 1.25 * radius
+        self.ax.set_xlim(-lim, lim)
+        self.ax.set_ylim(-lim, lim)
+        self.ax.set_aspect("equal")
+        self.ax.axis("off")
+        self.surface = PolyCollection([], edgecolors="none", antialiaseds=False)
+        self.target = LineCollection([], colors="#2a9df4", linewidths=0.4, alpha=0.8)
+        self.arrow = self.ax.annotate("", xy=(0, 0), xytext=(0, 0),
+                                      arrowprops={"arrowstyle": "-|>", "color": "#19c37d", "lw": 2.0})
+        self.text = self.ax.text(0.02, 0.97, "", transform=self.ax.transAxes, va="top", fontsize=8, color="0.15")
+        self.ax.add_collection(self.surface)
+        self.ax.add_collection(self.target)
+
+    def update(self, points: np.ndarray, rest: np.ndarray, target: np.ndarray | None = None,
+               contact: np.ndarray | None = None, force: np.ndarray | None = None, force_scale: float = 1.0,
+               caption: str = "") -> None:
+        """Redraw with current ``points`` (coloured by displacement from ``rest``), target and force (N)."""
+        disp = np.linalg.norm(points - rest, axis=1)
+        polys, colors = shaded_faces(points, self.triangles, disp, self.view, self.cmap, 0.0, self.vmax)
+        self.surface.set_verts(polys)
+        self.surface.set_facecolors(colors)
+        self.target.set_segments([] if target is None else visible_edges(target, self.triangles, self.view))
+        if contact is not None and force is not None and np.linalg.norm(force) > 0:
+            tip = self.view.project(contact[None])[0, :2]
+            tail = self.view.project((contact - force * force_scale)[None])[0, :2]
+            self.arrow.set_position(tuple(tail))
+            self.arrow.xy = tuple(tip)
+            self.arrow.set_visible(True)
+        else:
+            self.arrow.set_visible(False)
+        self.text.set_text(caption)
+
+    def rgb(self) -> np.ndarray:
+        """The current frame as an ``(H, W, 3)`` uint8 array."""
+        canvas = self.figure.canvas
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    def show(self) -> None:
+        """Display the frame in a window (``human`` mode); a no-op without a display."""
+        self.figure.canvas.draw_idle()
+        plt.pause(0.001)
+
+    def close(self) -> None:
+        if plt.fignum_exists(getattr(self.figure, "number", -1)):
+            plt.close(self.figure)

@@ -1,0 +1,29 @@
+"""The README's set-up commands are the ones CI and users run."""
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def readme_commands() -> list[str]:
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## Set up and run", 1)[1].split("\n## ", 1)[0]
+    return re.findall(r"```bash\n(.+?)\n```", section)
+
+
+def test_readme_shows_exactly_two_setup_commands():
+    commands = readme_commands()
+    assert len(commands) == 2
+    assert all(c.startswith("python3 -m venv .venv && . .venv/bin/activate && pip install -c constraints.txt") for c in commands)
+    assert "pytest" in commands[1]
+
+
+def test_ci_runs_the_readme_test_command():
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert readme_commands()[1] in ci.splitlines()
+
+
+def test_constraints_pin_the_cpu_torch():
+    lines = [line.strip() for line in (ROOT / "constraints.txt").read_text().splitlines()]
+    assert "torch==2.13.0" in lines
