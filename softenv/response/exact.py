@@ -1,0 +1,185 @@
+"""The exact response (analytic tissue, then projection on the shape model) and its table.
+
+:class:`ExactResponse` is the truth for analytic scenes; its cost grows with the number of surface
+points. :class:`TabulatedResponse` samples any response on a grid over a workspace box and
+interpolates multilinearly, at a cost independent of the mesh: environments step with it. Its
+lookup has a vectorised form and a scalar form (for one environment) that perform the same IEEE
+operations in the same order, so a batch of environments and single ones agree bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any, Sequence
+
+import numpy as np
+
+from .._progress import Progress
+from .._validation import check_array
+from ..forces import ForceLayout, Workspace, layout_from_dict
+from ..geometry import mesh_from_spec
+from ..shape_model import ShapeModel
+from ..tissue import AnalyticTissue, TissueParams
+from .base import MinMaxScaler, ResponseModel
+
+
+def _identity_scalers(model: ResponseModel, n_features: int, n_outputs: int) -> None:
+    model.n_features_, model.n_outputs_ = n_features, n_outputs
+    model.input_scaler_ = MinMaxScaler(np.ones(n_features), np.zeros(n_features))
+    model.output_scaler_ = MinMaxScaler(np.ones(n_outputs), np.zeros(n_outputs))
+
+
+class ExactResponse(ResponseModel):
+    """Force vectors -> tissue surface (:class:`~softenv.tissue.AnalyticTissue`) -> ``b`` (projection).
+
+    Nothing is learned: :meth:`fit` only checks shapes and returns ``self``.
+    """
+
+    kind = "exact"
+
+    def __init__(self, tissue: AnalyticTissue, layout: ForceLayout, shape_model: ShapeModel, *, clip: bool = False) -> None:
+        super().__init__(clip=clip)
+        if shape_model.n_features_ != 3 * tissue.mesh.n_vertices:
+            raise ValueError(f"the shape model has {shape_model.n_features_} coordinates but the tissue mesh has "
+                             f"{tissue.mesh.n_vertices} vertices")
+        self.tissue, self.layout, self.shape_model = tissue, layout, shape_model
+        _identity_scalers(self, layout.n_features, shape_model.n_components_)
+        self.shape_model_fingerprint_ = shape_model.fingerprint()
+        self.b_low_, self.b_high_ = shape_model.b_min_.copy(), shape_model.b_max_.copy()
+
+    def fit(self, forces: Any = None, b: Any = None, **_: Any) -> "ExactResponse":
+        return self
+
+    def _predict_scaled(self, x: np.ndarray) -> np.ndarray:
+        return self.shape_model.encode(self.tissue.surfaces(*self.layout.to_loads(x)))
+
+    def tabulate(self, workspace: Workspace, nodes: Sequence[int], progress: bool = False) -> "TabulatedResponse":
+        """Sample this response on a grid of ``nodes[i]`` points along each workspace axis."""
+        nodes = tuple(int(n) for n in nodes)
+        if len(nodes) != workspace.n_features or min(nodes) < 2:
+            raise ValueError(f"nodes={nodes} needs {workspace.n_features} counts of at least 2")
+        axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(workspace.low, workspace.high, nodes)]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(nodes))
+        values = np.empty((grid.shape[0], self.n_outputs_))
+        chunk = 2048
+        with Progress(-(-grid.shape[0] // chunk), "tabulating the exact response", enabled=progress) as bar:
+            for start in range(0, grid.shape[0], chunk):
+                values[start:start + chunk] = self._predict_scaled(grid[start:start + chunk])
+                bar.advance()
+        table = TabulatedResponse(workspace.low, workspace.high, values.reshape(*nodes, -1))
+        table.shape_model_fingerprint_ = self.shape_model_fingerprint_
+        table.b_low_, table.b_high_ = self.b_low_.copy(), self.b_high_.copy()
+        return table
+
+    def _params(self) -> dict[str, Any]:
+        return {"clip": self.clip}
+
+    def _extra_meta(self) -> dict[str, Any]:
+        return {"tissue": self.tissue.params.to_dict(), "mesh": self.tissue.mesh.spec(), "layout": self.layout.to_dict()}
+
+    @classmethod
+    def _from_saved(cls, params: dict[str, Any], arrays: dict[str, np.ndarray], meta: dict[str, Any],
+                    shape_model: ShapeModel | None, path: Any) -> "ExactResponse":
+        if shape_model is None:
+            raise ValueError(f"{str(path)!r} holds an exact response: load it with the shape_model it projects onto")
+        extra = meta.get("extra", {})
+        tissue = AnalyticTissue(mesh_from_spec(extra["mesh"]), TissueParams(**extra["tissue"]))
+        return cls(tissue, layout_from_dict(extra["layout"]), shape_model, **params)
+
+
+class TabulatedResponse(ResponseModel):
+    """Multilinear interpolation of a response sampled on a regular grid over ``[low, high]``.
+
+    Inputs must lie in the box; values within ``1e-9`` of its size outside are clamped onto it,
+    anything further is a ``ValueError``. The output is a convex combination of grid values, so it
+    stays within their range.
+    """
+
+    kind = "table"
+
+    def __init__(self, low: Sequence[float], high: Sequence[float], values: np.ndarray, *, clip: bool = False) -> None:
+        super().__init__(clip=clip)
+        self.low_ = np.asarray(low, dtype=np.float64)
+        self.high_ = np.asarray(high, dtype=np.float64)
+        values = check_array(values, "values", ndim=self.low_.size + 1)
+        counts = np.array(values.shape[:-1])
+        if (counts < 2).any() or (self.high_ <= self.low_).any():
+            raise ValueError(f"a table needs at least 2 nodes per axis and high > low; got nodes {counts.tolist()}, "
+                             f"low {self.low_.tolist()}, high {self.high_.tolist()}")
+        self.values_ = values
+        d = self.low_.size
+        _identity_scalers(self, d, values.shape[-1])
+        self.b_low_, self.b_high_ = values.reshape(-1, values.shape[-1]).min(0), values.reshape(-1, values.shape[-1]).max(0)
+        self.shape_model_fingerprint_ = ""
+        self.inv_step_ = (counts - 1) / (self.high_ - self.low_)
+        # pad one node per axis (a copy of the last) so a point on the upper face needs no clamping
+        padded = np.pad(values, [(0, 1)] * d + [(0, 0)], mode="edge")
+        self._flat = np.ascontiguousarray(padded.reshape(-1, values.shape[-1]))
+        strides = np.cumprod([1, *np.array(padded.shape[:-1])[::-1][:-1]])[::-1]
+        self._strides = strides.astype(np.int64)
+        self._strides_f = strides.astype(np.float64)
+        self._bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
+        self._offsets = self._bits @ self._strides
+        self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
+        self._stride_list, self._bits_list = self._strides.tolist(), self._bits.tolist()
+
+    @property
+    def nodes(self) -> tuple[int, ...]:
+        return tuple(self.values_.shape[:-1])
+
+    def fit(self, forces: Any = None, b: Any = None, **_: Any) -> "TabulatedResponse":
+        return self
+
+    def _predict_scaled(self, x: np.ndarray) -> np.ndarray:
+        tol = 1e-9 * (self.high_ - self.low_)
+        outside = (x < self.low_ - tol) | (x > self.high_ + tol)
+        if outside.any():
+            i, j = np.argwhere(outside)[0]
+            raise ValueError(f"forces[{i}, {j}] = {x[i, j]:g} lies outside the tabulated range "
+                             f"[{self.low_[j]:g}, {self.high_[j]:g}] of column {j}")
+        return self.lookup(np.clip(x, self.low_, self.high_))
+
+    def lookup(self, x: np.ndarray) -> np.ndarray:
+        """Interpolate at ``(N, d)`` points inside the box (not checked)."""
+        t = (x - self.low_) * self.inv_step_
+        cell = np.floor(t)
+        frac = t - cell
+        g = np.stack([1.0 - frac, frac], axis=-1)                  # (N, d, 2)
+        w = g[:, 0, self._bits[:, 0]]
+        for j in range(1, x.shape[1]):                            # same order as lookup_one
+            w = w * g[:, j, self._bits[:, j]]
+        base = (cell @ self._strides_f).astype(np.int64)
+        rows = self._flat[base[:, None] + self._offsets]          # (N, 2^d, k)
+        return np.matmul(w[:, None, :], rows)[:, 0]
+
+    def lookup_one(self, x: Sequence[float]) -> np.ndarray:
+        """Interpolate at one point given as Python floats: the scalar twin of :meth:`lookup`."""
+        base = 0
+        g = []
+        for xj, lo, inv, stride in zip(x, self._low_list, self._inv_list, self._stride_list):
+            t = (xj - lo) * inv
+            cell = math.floor(t)
+            frac = t - cell
+            base += cell * stride
+            g.append((1.0 - frac, frac))
+        weights = []
+        for bits in self._bits_list:
+            w = g[0][bits[0]]
+            for j in range(1, len(bits)):
+                w = w * g[j][bits[j]]
+            weights.append(w)
+        rows = self._flat[base + self._offsets]
+        return np.matmul(np.array(weights)[None, None, :], rows[None])[0, 0]
+
+    def _state(self) -> dict[str, np.ndarray]:
+        return {"low": self.low_, "high": self.high_, "values": self.values_}
+
+    @classmethod
+    def _from_saved(cls, params: dict[str, Any], arrays: dict[str, np.ndarray], meta: dict[str, Any],
+                    shape_model: ShapeModel | None, path: Any) -> "TabulatedResponse":
+        try:
+            table = cls(arrays["state_low"], arrays["state_high"], arrays["state_values"], **params)
+        except KeyError as exc:
+            raise ValueError(f"{str(path)!r}: table arrays are missing {exc}") from exc
+        return table
