@@ -67,7 +67,7 @@ def check_array(value: Any, name: str, *, ndim: int | tuple[int, ...] | None = N
     ``ndim`` allows more than one rank. Strings, objects and complex numbers are refused rather
     than cast.
     """
-    arr = np.asarray(value)
+    arr = value if type(value) is np.ndarray else np.asarray(value)
     if arr.dtype.kind not in "biuf":
         raise ValueError(f"{name} must be a real numeric array, got {_show(value)} (dtype {arr.dtype})")
     if ndim is not None:
@@ -80,8 +80,8 @@ def check_array(value: Any, name: str, *, ndim: int | tuple[int, ...] | None = N
         if tail is None or any(s is not None and s != t for s, t in zip(shape, tail)):
             want = "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{name} must have trailing shape {want}, got shape {arr.shape}")
-    out = np.array(arr, dtype=dtype, copy=True) if copy else np.asarray(arr, dtype=dtype)
-    if finite:
+    out = np.array(arr, dtype=dtype, copy=True) if copy else (arr if arr.dtype == dtype else arr.astype(dtype))
+    if finite and not (out.size < 4096 and np.isfinite(out).all()):  # small arrays: one cheap check
         check_finite(out, name)
     return out
 

@@ -65,6 +65,33 @@ def cmd_fit(args: argparse.Namespace) -> None:
     if args.out:
         model.save(args.out)
         print(f"saved {args.out}")
+    if args.response:
+        fit_response(args, data, model)
+
+
+def fit_response(args: argparse.Namespace, data, shape_model) -> None:
+    """Fit a regressor force -> b on a split of the data and report its test error."""
+    import time
+
+    from .datasets import split_by_contact, split_rows
+    from .response import MinMaxScaler, make_response
+
+    split = split_rows(data.n_samples, seed=args.seed) if args.split == "rows" else split_by_contact(data.contact_ids, seed=args.seed)
+    b = shape_model.encode(data.shapes)
+    model = make_response(args.response, seed=args.seed)
+    t0 = time.perf_counter()
+    model.fit(data.forces[split.train], b[split.train], validation=(data.forces[split.validation], b[split.validation]),
+              shape_model=shape_model)
+    fit_s = time.perf_counter() - t0
+    pred = model.predict(data.forces[split.test])
+    scale = MinMaxScaler.fit(b[split.train])
+    mse = float(np.mean((scale.transform(pred) - scale.transform(b[split.test])) ** 2))
+    surf = np.sqrt(np.mean((shape_model.decode(pred) - data.shapes[split.test]) ** 2) * 3) * 1e3
+    print(f"{args.response} on the {args.split} split: fit {fit_s:.2f} s, test MSE {mse:.3g} (normalised b), "
+          f"surface RMSE {surf:.4f} mm over {len(split.test)} test shapes")
+    if args.out_response:
+        model.save(args.out_response)
+        print(f"saved {args.out_response}")
 
 
 def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
@@ -76,6 +103,8 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .response import REGRESSORS
+
     parser = argparse.ArgumentParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -101,7 +130,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--components", type=_component_rule, default="scree",
                    help="scree | kneedle | noise | variance fraction (0.99) | int")
     p.add_argument("--noise-std", type=float, help="noise std in metres for the noise rule (default: the data's)")
-    p.add_argument("--out", help="write the model to this .npz")
+    p.add_argument("--out", help="write the shape model to this .npz")
+    p.add_argument("--response", choices=list(REGRESSORS), help="also fit this force -> b regressor and report its test error")
+    p.add_argument("--split", choices=["rows", "contacts"], default="rows",
+                   help="random rows (the paper's) or held-out contact points")
+    p.add_argument("--out-response", help="write the regressor to this .npz")
 
     p = sub.add_parser("bench", help="speed and memory benchmarks against CartPole-v1 (writes perf.md/.json)")
     p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")

@@ -241,6 +241,12 @@ class ShapeModel:
                 self._subsets.popitem(last=False)
         return self._subsets[key]
 
+    def rms_distance(self, b: np.ndarray, b_ref: np.ndarray) -> np.ndarray:
+        """RMS distance (m) over vertices between the surfaces of ``b`` and ``b_ref``, computed in b-space:
+        with orthonormal components ``||X - X_ref|| = ||b - b_ref||``, so no vertex is rebuilt."""
+        diff = np.asarray(b, dtype=np.float64) - np.asarray(b_ref, dtype=np.float64)
+        return np.sqrt(np.sum(diff * diff, axis=-1) / (self.n_features_ // 3))
+
     def reconstruct(self, shapes: np.ndarray) -> np.ndarray:
         """Project ``shapes`` on the model and rebuild them (float64)."""
         return self.decode(self.encode(shapes))

@@ -81,6 +81,8 @@ def test_components_are_orthonormal_and_b_distance_is_surface_distance():
     b1, b2 = rng.standard_normal((2, model.n_components_)) * model.sqrt_variance_
     x1, x2 = model.decode(b1), model.decode(b2)
     assert np.linalg.norm(x1 - x2) == pytest.approx(np.linalg.norm(b1 - b2), rel=1e-12)
+    rms = np.sqrt(np.mean(np.sum((x1 - x2).reshape(-1, 3) ** 2, axis=1)))
+    assert model.rms_distance(b1, b2) == pytest.approx(rms, rel=1e-12)
 
 
 def test_fit_is_deterministic_including_signs():

@@ -135,12 +135,12 @@ class AnfisResponse(ResponseModel):
         a, b, c = premise[..., 0][:, None], premise[..., 1][:, None], premise[..., 2][:, None]
         diff = xe - c
         z = np.abs(diff) / a
+        if not with_grad:  # z = 0 gives log mu = 0: a tiny floor avoids log(0) and its warning
+            return -np.logaddexp(0.0, 2.0 * b * np.log(np.maximum(z, 1e-300))), None
         with np.errstate(divide="ignore", invalid="ignore"):
             logz = np.log(z)
             t = 2.0 * b * logz
             logmu = -np.logaddexp(0.0, t)
-            if not with_grad:
-                return logmu, None
             sig = np.where(z > 0, 1.0 / (1.0 + np.exp(-t)), 0.0)          # z^2b / (1 + z^2b)
             d_a = sig * 2.0 * b / a
             d_b = np.where(z > 0, -2.0 * logz * sig, 0.0)
@@ -149,7 +149,8 @@ class AnfisResponse(ResponseModel):
 
     def _weights(self, logmu: np.ndarray) -> np.ndarray:
         """Normalised rule strengths ``(K, N, R)``: softmax of the summed log memberships."""
-        ell = logmu[:, :, self._input_index, self.rule_mf_].sum(axis=-1)    # (K, N, R)
+        K, N, d, m = logmu.shape
+        ell = logmu.reshape(K, N, d * m) @ self._selector                   # (K, N, R): sum over each rule's MFs
         ell -= ell.max(axis=-1, keepdims=True)
         w = np.exp(ell)
         w /= w.sum(axis=-1, keepdims=True)
@@ -157,8 +158,7 @@ class AnfisResponse(ResponseModel):
 
     def _outputs(self, x: np.ndarray, w: np.ndarray, consequent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rule outputs ``f`` ``(K, N, R, q)`` and model outputs ``(K, N, q)``."""
-        x1 = np.concatenate([np.ones((x.shape[0], 1)), x], axis=1)
-        f = np.einsum("ni,kriq->knrq", x1, consequent)
+        f = consequent[:, None, :, 0, :] + np.einsum("ni,kriq->knrq", x, consequent[:, :, 1:, :])
         return f, np.einsum("knr,knrq->knq", w, f)
 
     def _predict_scaled(self, x: np.ndarray) -> np.ndarray:
@@ -171,7 +171,7 @@ class AnfisResponse(ResponseModel):
     def _fit_scaled(self, x: np.ndarray, y: np.ndarray, validation: tuple[np.ndarray, np.ndarray] | None) -> None:
         n, d = x.shape
         self.rule_mf_, premise = self._initial_premise(x)
-        self._input_index = np.arange(d)
+        self._set_selector(premise.shape[1])
         K = 1 if self.multi_output else y.shape[1]
         targets = y[None] if self.multi_output else y.T[:, :, None]               # (K, N, q)
         premise = np.repeat(premise[None], K, axis=0)
@@ -232,6 +232,13 @@ class AnfisResponse(ResponseModel):
         theta = np.linalg.solve(A, np.einsum("kni,knq->kiq", D, targets))
         return theta.reshape(K, R, x1.shape[1], -1)
 
+    def _set_selector(self, n_mfs: int) -> None:
+        """0/1 matrix ``(d * m, R)`` picking each rule's membership functions (so strengths are one product)."""
+        d = self.rule_mf_.shape[1]
+        sel = np.zeros((d, n_mfs, self.rule_mf_.shape[0]))
+        sel[np.arange(d)[None, :], self.rule_mf_, np.arange(self.rule_mf_.shape[0])[:, None]] = 1.0
+        self._selector = sel.reshape(d * n_mfs, -1)
+
     def _enforce_limits(self, premise: np.ndarray) -> None:
         np.maximum(premise[..., 0], self.min_width, out=premise[..., 0])
         if self.mf == "gbell":
@@ -272,7 +279,7 @@ class AnfisResponse(ResponseModel):
         if not ok:
             raise ValueError(f"{str(path)!r}: ANFIS arrays do not fit {self.n_features_} inputs, {self.n_outputs_} outputs")
         self.rule_mf_, self.premise_, self.consequent_ = rule_mf, premise, consequent
-        self._input_index = np.arange(self.n_features_)
+        self._set_selector(premise.shape[2])
 
     @property
     def n_rules_(self) -> int:
