@@ -305,3 +305,19 @@ def test_tabulated_exact_response_is_close_to_direct(tmp_path):
     assert e_fine < e_coarse / 5
     fine.save(tmp_path / "t.npz")
     np.testing.assert_array_equal(ResponseModel.load(tmp_path / "t.npz").predict(x), fine.predict(x))
+
+
+@pytest.mark.parametrize("model", [PolynomialResponse(3, ridge=1e-8), AnfisResponse(epochs=3),
+                                   AnfisResponse(epochs=3, multi_output=True),
+                                   AnfisResponse(epochs=3, rules="cluster", mf="gaussian"),
+                                   MLPResponse(restarts=1, max_epochs=20)],
+                         ids=["poly3", "anfis", "anfis-shared", "anfis-cluster", "mlp"])
+def test_rowwise_prediction_is_independent_of_the_batch(model, paper):
+    """Environments need one row to give the same bits alone or in a batch of any size."""
+    d, sm, b, sp = paper
+    model.fit(d.forces[sp.train], b[sp.train])
+    x = np.random.default_rng(10).uniform(d.forces.min(0), d.forces.max(0), (257, 4))
+    batch = model.predict_rowwise(x)
+    for i in range(0, 257, 3):
+        assert np.array_equal(model.predict_rowwise(x[i:i + 1])[0], batch[i])
+    np.testing.assert_allclose(batch, model.predict(x), rtol=1e-12, atol=1e-15)

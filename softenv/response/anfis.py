@@ -166,6 +166,21 @@ class AnfisResponse(ResponseModel):
         _, y = self._outputs(x, self._weights(logmu), self.consequent_)
         return y[:, :, 0].T if not self.multi_output else y[0]
 
+    def _predict_scaled_rowwise(self, x: np.ndarray) -> np.ndarray:
+        logmu, _ = self._log_memberships(x, self.premise_)                    # elementwise
+        ell = logmu[:, :, 0, self.rule_mf_[:, 0]]
+        for i in range(1, x.shape[1]):
+            ell = ell + logmu[:, :, i, self.rule_mf_[:, i]]                  # (K, N, R)
+        ell = np.ascontiguousarray(ell)  # reductions over a strided axis change their order with N
+        w = np.exp(ell - ell.max(axis=-1, keepdims=True))
+        w = w / w.sum(axis=-1, keepdims=True)
+        c = self.consequent_                                                 # (K, R, d + 1, q)
+        f = c[:, None, :, 0, :]
+        for i in range(x.shape[1]):
+            f = f + x[None, :, None, i:i + 1] * c[:, None, :, i + 1, :]      # (K, N, R, q)
+        y = np.ascontiguousarray((w[..., None] * f).transpose(0, 1, 3, 2)).sum(axis=-1)  # rules on a contiguous last axis
+        return y[:, :, 0].T if not self.multi_output else y[0]
+
     # -- hybrid learning --------------------------------------------------------------------------
 
     def _fit_scaled(self, x: np.ndarray, y: np.ndarray, validation: tuple[np.ndarray, np.ndarray] | None) -> None:

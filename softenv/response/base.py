@@ -108,6 +108,19 @@ class ResponseModel:
             outside = None if outside is None else outside[0]
         return (y, outside) if return_clipped else y
 
+    def predict_rowwise(self, x: np.ndarray) -> np.ndarray:
+        """Predictions for ``(N, d)`` force vectors whose every row is bit-identical to predicting that
+        row alone, whatever ``N`` (no BLAS products, whose rounding depends on the batch shape).
+
+        For environments, where one env and a batch of them must agree exactly. Inputs are not
+        validated; clipping follows ``clip``.
+        """
+        y = self.output_scaler_.inverse(self._predict_scaled_rowwise(self.input_scaler_.transform(x)))
+        return np.clip(y, self.b_low_, self.b_high_) if self.clip else y
+
+    def _predict_scaled_rowwise(self, x: np.ndarray) -> np.ndarray:
+        raise NotImplementedError(f"{type(self).__name__} has no row-wise prediction")
+
     # -- persistence ------------------------------------------------------------------------------
 
     def save(self, path: str | os.PathLike) -> None:

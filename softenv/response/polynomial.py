@@ -59,6 +59,13 @@ class PolynomialResponse(ResponseModel):
     def _predict_scaled(self, x: np.ndarray) -> np.ndarray:
         return self.features(x) @ self.coef_
 
+    def _predict_scaled_rowwise(self, x: np.ndarray) -> np.ndarray:
+        phi = self.features(x)
+        y = phi[:, :1] * self.coef_[0]
+        for m in range(1, phi.shape[1]):
+            y = y + phi[:, m:m + 1] * self.coef_[m]
+        return y
+
     def _set_exponents(self, exponents: np.ndarray) -> None:
         self.exponents_ = exponents
         self._inputs = np.arange(exponents.shape[1])
