@@ -69,7 +69,6 @@ class ExactResponse(ResponseModel):
                 bar.advance()
         table = TabulatedResponse(workspace.low, workspace.high, values.reshape(*nodes, -1))
         table.shape_model_fingerprint_ = self.shape_model_fingerprint_
-        table.b_low_, table.b_high_ = self.b_low_.copy(), self.b_high_.copy()
         return table
 
     def _params(self) -> dict[str, Any]:
@@ -157,23 +156,22 @@ class TabulatedResponse(ResponseModel):
         return np.matmul(w[:, None, :], rows)[:, 0]
 
     def lookup_one(self, x: Sequence[float]) -> np.ndarray:
-        """Interpolate at one point given as Python floats: the scalar twin of :meth:`lookup`."""
+        """Interpolate at one point given as Python floats: the scalar twin of :meth:`lookup`.
+
+        The corner weights are the same left-to-right products in the same corner order, so the
+        result equals ``lookup`` bit for bit, without numpy's per-call cost on tiny arrays.
+        """
         base = 0
-        g = []
-        for xj, lo, inv, stride in zip(x, self._low_list, self._inv_list, self._stride_list):
+        weights = [1.0]
+        for j, (xj, lo, inv, stride) in enumerate(zip(x, self._low_list, self._inv_list, self._stride_list)):
             t = (xj - lo) * inv
             cell = math.floor(t)
             frac = t - cell
             base += cell * stride
-            g.append((1.0 - frac, frac))
-        weights = []
-        for bits in self._bits_list:
-            w = g[0][bits[0]]
-            for j in range(1, len(bits)):
-                w = w * g[j][bits[j]]
-            weights.append(w)
-        rows = self._flat[base + self._offsets]
-        return np.matmul(np.array(weights)[None, None, :], rows[None])[0, 0]
+            pair = (1.0 - frac, frac)
+            weights = list(pair) if j == 0 else [w * p for w in weights for p in pair]
+        rows = self._flat.take(self._offsets + base, axis=0)
+        return np.dot(np.array(weights), rows)          # the same BLAS vector-matrix kernel as lookup's matmul
 
     def _state(self) -> dict[str, np.ndarray]:
         return {"low": self.low_, "high": self.high_, "values": self.values_}

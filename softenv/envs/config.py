@@ -1,0 +1,212 @@
+"""Scene configuration: a validated, declarative description of what an environment builds.
+
+A scene is a nested mapping of sections (``tissue``, ``mesh``, ``shape_model``, ``response``,
+``device``, ``dynamics``, ``task``, ``reward``, ``render``). :func:`default_config` returns the
+defaults; :func:`make_config` merges overrides (``gym.make("SoftSphere-v0", dynamics={"kind":
+"viscoelastic"})``) and validates every value. An unknown section or key, or a value out of range,
+raises a ``ValueError`` that lists the valid keys with their units and ranges. :func:`describe_config`
+prints the whole table.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from .._validation import check_choice, check_int, check_real
+from ..response import REGRESSORS
+from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
+
+
+@dataclass(frozen=True)
+class Field:
+    """One configurable value: default, unit, allowed values (as text) and a checker."""
+
+    default: Any
+    unit: str
+    allowed: str
+    check: Callable[[Any, str], Any]
+    doc: str
+
+
+def _real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
+    return lambda v, name: check_real(v, name, lo, hi, low_open=lo_open, high_open=hi_open)
+
+
+def _int(lo: int | None = None, hi: int | None = None):
+    return lambda v, name: check_int(v, name, lo, hi)
+
+
+def _choice(*options: Any):
+    return lambda v, name: check_choice(v, name, options)
+
+
+def _bool(v: Any, name: str) -> bool:
+    if not isinstance(v, bool):
+        raise ValueError(f"{name} must be True or False, got {v!r}")
+    return v
+
+
+def _pair(lo: float, hi: float):
+    def check(v: Any, name: str) -> tuple[float, float]:
+        if not isinstance(v, (tuple, list)) or len(v) != 2:
+            raise ValueError(f"{name} must be a (low, high) pair, got {v!r}")
+        a, b = (check_real(x, f"{name}[{i}]", lo, hi) for i, x in enumerate(v))
+        if b < a:
+            raise ValueError(f"{name}={tuple(v)!r}: high must not be below low")
+        return (a, b)
+    return check
+
+
+def _nodes(v: Any, name: str) -> tuple[int, ...]:
+    if not isinstance(v, (tuple, list)) or len(v) != 4:
+        raise ValueError(f"{name} must be 4 node counts (insertion, lateral, normal, sideways), got {v!r}")
+    return tuple(check_int(x, f"{name}[{i}]", 2, 257) for i, x in enumerate(v))
+
+
+def _components(v: Any, name: str) -> int | float | str:
+    if isinstance(v, str):
+        return check_choice(v, name, ("scree", "kneedle"))
+    if isinstance(v, float) and 0 < v < 1:
+        return v
+    return check_int(v, name, 1, 500)
+
+
+SCHEMA: dict[str, dict[str, Field]] = {
+    "tissue": {
+        "law": Field("linear", "", "linear | stiffening", _choice("linear", "stiffening"),
+                     "linear (the paper's regime) or Fung stiffening with Hertzian contact widening"),
+        "E": Field(effective_modulus(), "Pa", "> 0", _real(0, None, lo_open=True),
+                   "effective Young's modulus (default: 40 N indents 40 % of the radius)"),
+        "nu": Field(TONGUE_POISSON, "", "[0, 0.5)", _real(0, 0.5, hi_open=True), "Poisson's ratio"),
+        "radius": Field(TONGUE_RADIUS_M, "m", "(0, 1]", _real(0, 1, lo_open=True), "sphere radius"),
+        "patch_radius": Field(BLADE_PATCH_RADIUS_M, "m", "(0, radius]", _real(0, 1, lo_open=True), "blade contact-patch radius"),
+    },
+    "mesh": {
+        "kind": Field("latlong", "", "latlong | icosphere", _choice("latlong", "icosphere"), "surface sampling"),
+        "resolution": Field(21, "", "latlong 3-200, icosphere 0-6", _int(0, 200),
+                            "points per ring (latlong: resolution^2 points) or icosphere subdivisions"),
+    },
+    "shape_model": {
+        "n_components": Field(0.999, "", "scree | kneedle | fraction in (0, 1) | int 1-500", _components,
+                              "how many PCA components the scene keeps"),
+        "n_contacts": Field(64, "", "8-4096", _int(8, 4096), "contact points sampled over the workspace"),
+        "n_loads": Field(16, "", "2-256", _int(2, 256), "loads sampled per contact point"),
+        "seed": Field(0, "", ">= 0", _int(0, None), "seed of the workspace sample"),
+    },
+    "response": {
+        "model": Field("exact", "", "exact | " + " | ".join(REGRESSORS), _choice("exact", *REGRESSORS),
+                       "force -> b model that the scene steps with (exact: tabulated analytic tissue)"),
+        "table_nodes": Field((25, 11, 9, 9), "", "4 counts, 2-257", _nodes,
+                             "grid of the tabulated exact response (insertion, lateral, normal, sideways)"),
+    },
+    "device": {
+        "kind": Field("ideal", "", "ideal", _choice("ideal"), "ideal: force = scaled action"),
+        "insertion_deg": Field((30.0, 120.0), "deg", "within [0, 180]", _pair(0, 180),
+                               "contact range along the midline, from the front (0) over the top (90)"),
+        "lateral_deg": Field(20.0, "deg", "(0, 80]", _real(0, 80, lo_open=True), "contact range off the midline, +-"),
+        "max_normal_force": Field(40.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest pressing force"),
+        "max_sideways_force": Field(10.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest sideways force, +-"),
+    },
+    "dynamics": {
+        "kind": Field("quasi_static", "", "quasi_static | viscoelastic", _choice("quasi_static", "viscoelastic"),
+                      "tissue responds instantly, or creeps (standard linear solid in b-space)"),
+        "dt": Field(0.05, "s", "(0, 10]", _real(0, 10, lo_open=True), "control period"),
+        "relaxed_fraction": Field(0.7, "", "(0, 1]", _real(0, 1, lo_open=True),
+                                  "share of the deformation that appears at once (Hastings 1996: ~70 %)"),
+        "time_constant": Field(5.8, "s", "[0, 1e6]", _real(0, 1e6), "creep time constant (Hastings 1996: ~5.8 s)"),
+    },
+    "task": {
+        "kind": Field("reach", "", "reach | procedure", _choice("reach", "procedure"),
+                      "reach one target shape, or follow insert -> press -> sweep"),
+        "split": Field("train", "", "train | test", _choice("train", "test"), "target set (disjoint in force space)"),
+        "horizon": Field(100, "steps", "1-100000", _int(1, 100_000), "episode length (registered max_episode_steps)"),
+        "tolerance": Field(0.1, "", "(0, 1)", _real(0, 1, lo_open=True, hi_open=True),
+                           "success: shape error below this share of the target's displacement"),
+        "terminate_on_success": Field(False, "", "True | False", _bool, "end the episode on success"),
+        "target_insertion_deg": Field((75.0, 110.0), "deg", "within the device range", _pair(0, 180),
+                                      "laryngoscopy targets: insertion depth"),
+        "target_lateral_deg": Field((-4.0, 8.0), "deg", "within the device range", _pair(-80, 80),
+                                    "laryngoscopy targets: lateral offset"),
+        "target_normal_force": Field((20.0, 40.0), "N", "within the device range", _pair(0, 1e6),
+                                     "laryngoscopy targets: compression"),
+        "target_sideways_force": Field((3.0, 10.0), "N", "within the device range", _pair(-1e6, 1e6),
+                                       "laryngoscopy targets: sweep toward +y"),
+    },
+    "reward": {
+        "shape_weight": Field(1.0, "", ">= 0", _real(0, None), "weight of -(shape error / target displacement)"),
+        "force_weight": Field(0.0, "", ">= 0", _real(0, None), "weight of -(force above safe_force) / safe_force"),
+        "safe_force": Field(30.0, "N", "> 0", _real(0, None, lo_open=True), "force above which the penalty applies"),
+        "smoothness_weight": Field(0.0, "", ">= 0", _real(0, None), "weight of -mean squared action change"),
+    },
+    "render": {
+        "size": Field(320, "px", "64-2048", _int(64, 2048), "frame width and height"),
+        "fps": Field(20, "1/s", "1-240", _int(1, 240), "frames per second in human mode"),
+    },
+}
+
+
+def default_config() -> dict[str, dict[str, Any]]:
+    """The default scene (SoftSphere-v0), as a fresh nested dict."""
+    return {section: {key: copy.deepcopy(f.default) for key, f in fields.items()} for section, fields in SCHEMA.items()}
+
+
+def make_config(base: dict[str, dict[str, Any]] | None = None, **overrides: Any) -> dict[str, dict[str, Any]]:
+    """Merge ``overrides`` (section -> {key: value}) into ``base`` (default: the defaults) and validate."""
+    config = copy.deepcopy(base) if base is not None else default_config()
+    for section, values in overrides.items():
+        if section not in SCHEMA:
+            raise ValueError(f"unknown scene section {section!r}; valid sections: {list(SCHEMA)}")
+        if not isinstance(values, dict):
+            raise ValueError(f"scene section {section!r} must be a dict of settings, got {values!r}; "
+                             f"valid keys: {_keys_help(section)}")
+        for key, value in values.items():
+            if key not in SCHEMA[section]:
+                raise ValueError(f"unknown key {key!r} in scene section {section!r}; valid keys: {_keys_help(section)}")
+            config[section][key] = value
+    return validate_config(config)
+
+
+def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Check every value and the constraints between them; returns the normalised config."""
+    out: dict[str, dict[str, Any]] = {}
+    for section, fields in SCHEMA.items():
+        values = config.get(section, {})
+        out[section] = {key: f.check(values.get(key, f.default), f"{section}.{key}") for key, f in fields.items()}
+    t, dev, task = out["tissue"], out["device"], out["task"]
+    if t["patch_radius"] > t["radius"]:
+        raise ValueError(f"tissue.patch_radius={t['patch_radius']:g} m exceeds tissue.radius={t['radius']:g} m")
+    if dev["insertion_deg"][1] <= dev["insertion_deg"][0]:
+        raise ValueError(f"device.insertion_deg={dev['insertion_deg']!r}: high must exceed low")
+    mesh = out["mesh"]
+    limit = (3, 200) if mesh["kind"] == "latlong" else (0, 6)
+    check_int(mesh["resolution"], "mesh.resolution", *limit)
+    checks = [("target_insertion_deg", dev["insertion_deg"]), ("target_lateral_deg", (-dev["lateral_deg"], dev["lateral_deg"])),
+              ("target_normal_force", (0.0, dev["max_normal_force"])),
+              ("target_sideways_force", (-dev["max_sideways_force"], dev["max_sideways_force"]))]
+    for key, (lo, hi) in checks:
+        a, b = task[key]
+        if a < lo or b > hi:
+            raise ValueError(f"task.{key}={task[key]!r} must lie within the device range [{lo:g}, {hi:g}]")
+    return out
+
+
+def describe_config() -> str:
+    """A Markdown table of every setting: section, key, default, unit, allowed values, meaning."""
+    lines = ["| section | key | default | unit | allowed | meaning |", "|---|---|---|---|---|---|"]
+    for section, fields in SCHEMA.items():
+        for key, f in fields.items():
+            default = f"{f.default:.4g}" if isinstance(f.default, float) else repr(f.default)
+            lines.append(f"| {section} | {key} | {default} | {f.unit} | {f.allowed} | {f.doc} |")
+    return "\n".join(lines)
+
+
+def _keys_help(section: str) -> str:
+    return ", ".join(f"{k} ({f.unit + ', ' if f.unit else ''}{f.allowed})" for k, f in SCHEMA[section].items())
+
+
+def config_key(config: dict[str, dict[str, Any]], sections: tuple[str, ...]) -> str:
+    """A stable text key of some sections (for caches)."""
+    return repr([(s, sorted(config[s].items())) for s in sections])
+

@@ -1,0 +1,161 @@
+"""The parts an environment is composed of: device, dynamics and task.
+
+Each part works on arrays with any leading batch shape, so the single environment (state of shape
+``(k,)``) and its batched twin (``(N, k)``) call the same code. Scalar twins exist only where the
+single environment would otherwise pay numpy's per-call overhead on four numbers; they perform the
+same IEEE operations in the same order, so both environments agree bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..forces import Workspace
+
+
+class IdealDevice:
+    """Action in ``[-1, 1]^4`` -> force features: ``low + (a + 1) (high - low) / 2`` per column.
+
+    Columns: insertion (m of arc along the midline), lateral (m of arc off the midline), normal force
+    (N, pressing), sideways force (N, toward +y). The device has no dynamics: the force follows the
+    command at once.
+    """
+
+    def __init__(self, workspace: Workspace) -> None:
+        low, high = np.asarray(workspace.low), np.asarray(workspace.high)
+        self.mid = (low + high) / 2
+        self.half = (high - low) / 2
+        self._mid, self._half = self.mid.tolist(), self.half.tolist()
+        self.rest_action = np.array([0.0, 0.0, -1.0, 0.0], dtype=np.float32)   # zero force, mid contact
+
+    def features(self, action: np.ndarray) -> np.ndarray:
+        """Force features of actions ``(..., 4)``."""
+        return self.mid + action * self.half
+
+    def features_one(self, action: list[float]) -> list[float]:
+        """Scalar twin of :meth:`features` for one action given as Python floats."""
+        return [m + a * h for m, a, h in zip(self._mid, action, self._half)]
+
+    def normalised(self, features: np.ndarray) -> np.ndarray:
+        """Features mapped back onto ``[-1, 1]`` (the device state in observations)."""
+        return (features - self.mid) / self.half
+
+    def normalised_one(self, features: list[float]) -> list[float]:
+        """Scalar twin of :meth:`normalised`."""
+        return [(f - m) / h for f, m, h in zip(features, self._mid, self._half)]
+
+
+class Dynamics:
+    """Shape parameters relax toward the equilibrium ``g`` of the applied force.
+
+    ``quasi_static``: ``b = g``. ``viscoelastic``: a standard linear solid in b-space,
+    ``z <- z + (g - z)(1 - exp(-dt / tau))``, ``b = r g + (1 - r) z``: exact for a force held over
+    the step, stable for every ``dt / tau`` (the factor lies in (0, 1]), and ``tau = 0`` gives the
+    instant response with no division. ``1 - exp(-x)`` is computed as ``-expm1(-x)`` so tiny
+    ``dt / tau`` keep their precision.
+    """
+
+    def __init__(self, kind: str, dt: float, relaxed_fraction: float, time_constant: float) -> None:
+        self.kind = kind
+        self.dt = dt
+        self.r = relaxed_fraction
+        self.one_minus_r = 1.0 - relaxed_fraction
+        self.move = 1.0 if time_constant == 0.0 else -math.expm1(-dt / time_constant)
+
+    @property
+    def stateful(self) -> bool:
+        return self.kind == "viscoelastic"
+
+    def step(self, z: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """Advance the creep state ``z`` in place toward ``g``; return the new shape ``b``."""
+        if self.kind == "quasi_static":
+            return g
+        z += (g - z) * self.move
+        return self.r * g + self.one_minus_r * z
+
+
+class TargetFamily:
+    """Laryngoscopy-like target forces: a box in force-feature space, split into train and test cells.
+
+    The box is divided into ``cells`` equal parts per axis; a cell belongs to the test set when the
+    sum of its indices is odd (a checkerboard), so train and test targets never share a cell and
+    both cover the whole family. A target force is drawn by picking a cell of the split uniformly,
+    then a point uniformly inside it.
+    """
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, split: str, cells: int = 3) -> None:
+        self.low, self.high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        grid = np.stack(np.meshgrid(*[np.arange(cells)] * self.low.size, indexing="ij"), axis=-1).reshape(-1, self.low.size)
+        parity = grid.sum(axis=1) % 2
+        self.cells = grid[parity == (1 if split == "test" else 0)]
+        self.n_cells = cells
+        self.split = split
+
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        cell = self.cells[rng.integers(len(self.cells))]
+        unit = (cell + rng.random(self.low.size)) / self.n_cells
+        return self.low + unit * (self.high - self.low)
+
+    def cell_of(self, features: np.ndarray) -> np.ndarray:
+        """Cell indices of force features (for checking the split)."""
+        unit = (np.asarray(features) - self.low) / (self.high - self.low)
+        return np.minimum((unit * self.n_cells).astype(int), self.n_cells - 1)
+
+
+def target_schedule(kind: str, target: np.ndarray, start_insertion: float, horizon: int) -> np.ndarray:
+    """Target force features for every step of an episode, ``(horizon, 4)``.
+
+    ``reach``: the target force throughout. ``procedure``: the laryngoscopy sequence in three equal
+    phases -- *insert* (the blade slides from the front of the range to the target depth with a light
+    touch of 10 % of the target's pressing force), *press* (the pressing force rises to the target's),
+    *sweep* (the sideways force rises to the target's).
+    """
+    if kind == "reach":
+        return np.tile(target, (horizon, 1))
+    t = (np.arange(horizon) + 1) / horizon
+    phase = np.clip(3.0 * t[:, None] - np.arange(3)[None, :], 0.0, 1.0)    # progress in each phase
+    out = np.empty((horizon, 4))
+    out[:, 0] = start_insertion + (target[0] - start_insertion) * phase[:, 0]
+    out[:, 1] = target[1] * phase[:, 0]
+    out[:, 2] = target[2] * (0.1 + 0.9 * phase[:, 1])
+    out[:, 3] = target[3] * phase[:, 2]
+    return out
+
+
+class ScalarOps:
+    """``sqrt`` and ``max(x, 0)`` for Python floats (the single environment)."""
+
+    sqrt = staticmethod(math.sqrt)
+
+    @staticmethod
+    def positive(x: float) -> float:
+        return x if x > 0.0 else 0.0
+
+
+class ArrayOps:
+    """``sqrt`` and ``max(x, 0)`` for arrays (the batched environment)."""
+
+    sqrt = staticmethod(np.sqrt)
+
+    @staticmethod
+    def positive(x: np.ndarray) -> np.ndarray:
+        return np.maximum(x, 0.0)
+
+
+def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,
+                 weights: dict[str, float], ops: Any) -> tuple[Any, Any, Any, Any, Any, Any]:
+    """Reward and its terms from squared b-space distances (scalars or arrays alike).
+
+    Returns ``(reward, shape_term, force_term, smooth_term, error_ratio, force)``:
+    ``error_ratio = ||b - b*|| / max(||b* - b_rest||, floor)`` -- the RMS surface error over the
+    target's RMS displacement from rest; ``force = sqrt(normal^2 + sideways^2)``.
+    """
+    ratio = ops.sqrt(sq_dist / sq_ref)
+    force = ops.sqrt(normal * normal + sideways * sideways)
+    shape_term = -weights["shape_weight"] * ratio
+    force_term = -weights["force_weight"] * (ops.positive(force - weights["safe_force"]) / weights["safe_force"])
+    smooth_term = -weights["smoothness_weight"] * (sq_action_change / 4.0)
+    return shape_term + force_term + smooth_term, shape_term, force_term, smooth_term, ratio, force

@@ -1,0 +1,49 @@
+"""Frames of a scene: the deformed sphere coloured by displacement, the target as a wireframe and
+the applied force as an arrow. matplotlib is imported only when the first frame is drawn."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .world import World
+
+RENDER_MODES = ("rgb_array", "human")
+
+
+def check_render_mode(render_mode: str | None) -> None:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode={render_mode!r} is not one of {[None, *RENDER_MODES]}")
+
+
+class SceneRenderer:
+    """Draws one env's state; ``human`` shows a window, ``rgb_array`` returns ``(H, W, 3)`` uint8."""
+
+    def __init__(self, world: World, render_mode: str) -> None:
+        self.world = world
+        self.render_mode = render_mode
+        self._figure: Any = None
+
+    def frame(self, b: np.ndarray, target_b: np.ndarray, features: np.ndarray, caption: str = "") -> np.ndarray | None:
+        scene = self.world.scene
+        if self._figure is None:
+            from ..render import SphereFigure     # matplotlib only when something is drawn
+
+            self._figure = SphereFigure(scene.mesh.triangles, scene.tissue.radius, self.world.config["render"]["size"],
+                                        interactive=self.render_mode == "human")
+        n = scene.mesh.n_vertices
+        points = scene.shape_model.decode(b).reshape(n, 3)
+        target = scene.shape_model.decode(target_b).reshape(n, 3)
+        contact, force = scene.layout.to_loads(np.asarray(features, dtype=np.float64)[None])
+        scale = 0.3 * scene.tissue.radius / max(float(scene.workspace.high[2]), 1e-12)
+        self._figure.update(points, scene.mesh.vertices, target, contact[0], force[0], scale, caption)
+        if self.render_mode == "human":
+            self._figure.show()
+            return None
+        return self._figure.rgb()
+
+    def close(self) -> None:
+        if self._figure is not None:
+            self._figure.close()
+            self._figure = None

@@ -1,0 +1,87 @@
+"""A thin stable-baselines3 ``VecEnv`` over the natively batched SoftSphere env.
+
+SB3 resets finished envs in the same step and expects ``infos`` as a list of dicts with
+``terminal_observation`` and ``TimeLimit.truncated``; this adapter runs the batched twin in
+``same_step`` autoreset mode and converts its array infos. Wrap it in SB3's ``VecMonitor`` for
+episode statistics. Importing this module imports stable-baselines3 (and torch).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Iterable, Sequence
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+
+from .soft_sphere import SoftSphereVectorEnv
+
+
+class SoftSphereSB3VecEnv(VecEnv):
+    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", **scene)``: SB3's view of the batched twin."""
+
+    def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0", **kwargs: Any) -> None:
+        spec = gym.spec(env_id)
+        if spec.vector_entry_point != "softenv.envs.soft_sphere:SoftSphereVectorEnv":
+            raise ValueError(f"env_id={env_id!r} is not a SoftSphere id")
+        scene = {**spec.kwargs, **kwargs}
+        self.venv = SoftSphereVectorEnv(num_envs, max_episode_steps=spec.max_episode_steps, autoreset_mode="same_step",
+                                        **scene)
+        self.env_id = env_id
+        super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
+        self.render_mode = self.venv.render_mode
+        self._actions: np.ndarray | None = None
+
+    def reset(self) -> Any:
+        seeds = self._seeds if any(s is not None for s in self._seeds) else None
+        options = self._options[0] if self._options and self._options[0] else None
+        obs, _ = self.venv.reset(seed=seeds, options=options)
+        self._reset_seeds()
+        self._reset_options()
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, terminated, truncated, info = self.venv.step(self._actions)
+        dones = terminated | truncated
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        final = info.get("final_info", {})
+        for i in range(self.num_envs):
+            source = final if dones[i] else info
+            infos[i] = {key: _item(value[i]) for key, value in source.items()
+                        if not key.startswith("_") and source.get(f"_{key}", np.zeros(1, bool))[i]}
+            if dones[i]:
+                infos[i]["terminal_observation"] = info["final_obs"][i]
+                infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        return obs, rewards.astype(np.float32), dones, infos
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [getattr(self.venv, attr_name)] * len(self._indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any) -> list[Any]:
+        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
+        return [result] * len(self._indices(indices))
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * len(self._indices(indices))
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        frames = self.venv.render()
+        return list(frames) if frames is not None else [None] * self.num_envs
+
+    def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        if indices is None:
+            return range(self.num_envs)
+        return [indices] if isinstance(indices, int) else list(indices)
+
+
+def _item(value: Any) -> Any:
+    return value.item() if isinstance(value, np.generic) else value

@@ -1,0 +1,224 @@
+"""One scene's parts composed into the rules of an episode, shared by the single and batched envs.
+
+:class:`World` holds the immutable :class:`~softenv.envs.scene.Scene` (tissue, shape model,
+response), the device, the dynamics, the target family, the reward weights and the observation
+layout. Everything that happens at reset (sampling targets, their shapes, the zero-force and oracle
+reference returns for the normalised score) runs here on arrays with a leading batch axis, so the
+single env (a batch of one) and the batched twin share the code and agree bit for bit. Per-step work
+lives in the envs themselves: the single env's scalar fast path and the batched twin's array path
+perform the same IEEE operations in the same order.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from ..response import TabulatedResponse
+from .config import make_config
+from .parts import Dynamics, IdealDevice, TargetFamily, target_schedule
+from .scene import Scene, build_scene
+
+OBS_MODES = ("vector", "dict", "vertices")
+# the shape-error floor: a target displacement below this share of the family centre's counts as it
+REFERENCE_FLOOR = 0.1
+
+
+@dataclass
+class Episodes:
+    """Per-episode arrays for ``n`` envs (leading axis), made at reset and read every step."""
+
+    target_features: np.ndarray   # (n, T, 4) force features of the target at each step (T = 1 for reach)
+    target_b: np.ndarray          # (n, T, k) target shape parameters
+    sq_ref: np.ndarray            # (n, T) squared reference distance max(||b* - b_rest||, floor)^2
+    zero_cum: np.ndarray          # (n, H) cumulative error ratio of the zero-force policy
+    oracle_cum: np.ndarray        # (n, H) cumulative error ratio of the exact oracle
+
+
+class World:
+    """The composed environment rules for one validated scene config (see the module docstring)."""
+
+    def __init__(self, config: dict[str, Any], obs_mode: str = "vector") -> None:
+        if obs_mode not in OBS_MODES:
+            raise ValueError(f"obs_mode={obs_mode!r} is not one of {list(OBS_MODES)}")
+        self.config = config
+        self.obs_mode = obs_mode
+        self.scene: Scene = build_scene(config)
+        scene = self.scene
+        self.device = IdealDevice(scene.workspace)
+        self.dynamics = Dynamics(**config["dynamics"])
+        task, R = config["task"], config["tissue"]["radius"]
+        low = np.array([R * math.radians(task["target_insertion_deg"][0]), R * math.radians(task["target_lateral_deg"][0]),
+                        task["target_normal_force"][0], task["target_sideways_force"][0]])
+        high = np.array([R * math.radians(task["target_insertion_deg"][1]), R * math.radians(task["target_lateral_deg"][1]),
+                         task["target_normal_force"][1], task["target_sideways_force"][1]])
+        self.family = TargetFamily(low, high, task["split"])
+        self.task_kind = task["kind"]
+        self.horizon = task["horizon"]
+        self.tolerance = task["tolerance"]
+        self.terminate_on_success = task["terminate_on_success"]
+        self.weights = dict(config["reward"])
+        self.k = scene.n_components
+        self.n_vertices = scene.mesh.n_vertices
+        self.sqrt_variance = scene.sqrt_variance
+        self.inv_sqrt = 1.0 / self.sqrt_variance
+        self.b_rest = scene.response.predict_rowwise(scene.rest_features[None])[0]
+        centre = scene.response.predict_rowwise(((low + high) / 2)[None])[0]
+        self.floor_sq = (REFERENCE_FLOOR * float(np.sqrt(np.sum((centre - self.b_rest) ** 2)))) ** 2
+        self.start_insertion = float(scene.workspace.low[0])
+        self._table = scene.response if isinstance(scene.response, TabulatedResponse) else None
+        self.action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
+        self.observation_space = self._observation_space()
+
+    @classmethod
+    def from_overrides(cls, obs_mode: str = "vector", **overrides: Any) -> "World":
+        return cls(make_config(**overrides), obs_mode)
+
+    # -- response -------------------------------------------------------------------------------
+
+    def response(self, features: np.ndarray) -> np.ndarray:
+        """Equilibrium ``b`` of ``(n, 4)`` force features, each row independent of the others."""
+        return self.scene.response.predict_rowwise(features)
+
+    def response_one(self, features: list[float]) -> np.ndarray:
+        """Scalar twin of :meth:`response` for one force given as Python floats (bitwise equal)."""
+        if self._table is not None:
+            return self._table.lookup_one(features)
+        return self.scene.response.predict_rowwise(np.array([features]))[0]
+
+    # -- observations ---------------------------------------------------------------------------
+
+    @property
+    def obs_size(self) -> int:
+        return 2 * self.k + 8
+
+    def _observation_space(self) -> spaces.Space:
+        b_low, b_high = self.scene.b_bounds
+        margin = 1e-6 * (b_high - b_low) + 1e-12           # float rounding of convex combinations
+        lo = (b_low - margin) * self.inv_sqrt
+        hi = (b_high + margin) * self.inv_sqrt
+        ones = np.ones(8)
+        low = np.concatenate([lo, lo, -ones]).astype(np.float32)
+        high = np.concatenate([hi, hi, ones]).astype(np.float32)
+        if self.obs_mode == "dict":
+            goal = spaces.Box(low[:self.k], high[:self.k], dtype=np.float32)
+            return spaces.Dict({"observation": spaces.Box(-1.0, 1.0, (8,), np.float32),
+                                "achieved_goal": goal, "desired_goal": goal})
+        if self.obs_mode == "vertices":
+            # vertices are linear in b, and b stays in its box: bound each coordinate over the box
+            sm, R = self.scene.shape_model, self.scene.tissue.radius
+            phi = sm.components_[:self.k]
+            ends = np.stack([phi * b_low[:, None], phi * b_high[:, None]])
+            v_low = (sm.mean_ + ends.min(axis=0).sum(axis=0)) / R
+            v_high = (sm.mean_ + ends.max(axis=0).sum(axis=0)) / R
+            pad = 1e-6 * (v_high - v_low) + 1e-9
+            low = np.concatenate([low, (v_low - pad).astype(np.float32)])
+            high = np.concatenate([high, (v_high + pad).astype(np.float32)])
+        return spaces.Box(low, high, dtype=np.float32)
+
+    def observe(self, b: np.ndarray, target_b: np.ndarray, device_state: Any, prev_action: Any) -> Any:
+        """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
+        k = self.k
+        obs = np.empty(b.shape[:-1] + (2 * k + 8,), np.float32)      # float64 values rounded on assignment
+        obs[..., :k] = b * self.inv_sqrt
+        obs[..., k:2 * k] = target_b * self.inv_sqrt
+        if isinstance(device_state, list):                              # the single env's fast path
+            obs[2 * k:] = device_state + prev_action
+        else:
+            obs[..., 2 * k:2 * k + 4] = device_state
+            obs[..., 2 * k + 4:] = prev_action
+        if self.obs_mode == "dict":
+            return {"observation": obs[..., 2 * k:].copy(), "achieved_goal": obs[..., :k].copy(),
+                    "desired_goal": obs[..., k:2 * k].copy()}
+        if self.obs_mode == "vertices":
+            return np.concatenate([obs, self.vertices(b).astype(np.float32)], axis=-1)
+        return obs
+
+    def vertices(self, b: np.ndarray) -> np.ndarray:
+        """Surface points over the radius, flattened: ``(3 n,)`` or ``(N, 3 n)`` (row by row, so a
+        batch equals its rows decoded alone)."""
+        R = self.scene.tissue.radius
+        if b.ndim == 1:
+            return self.scene.shape_model.decode(b) / R
+        return np.stack([self.scene.shape_model.decode(row) / R for row in b])
+
+    def goal_shape_term(self, achieved_goal: np.ndarray, desired_goal: np.ndarray) -> Any:
+        """The shape reward term from ``b / sqrt(lambda)`` goals (any leading axes)."""
+        b = np.asarray(achieved_goal, dtype=np.float64) * self.sqrt_variance
+        target = np.asarray(desired_goal, dtype=np.float64) * self.sqrt_variance
+        d = b - target
+        r = target - self.b_rest
+        sq_ref = np.maximum(np.sum(r * r, axis=-1), self.floor_sq)
+        return -self.weights["shape_weight"] * np.sqrt(np.sum(d * d, axis=-1) / sq_ref)
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
+        """Reward from goals (dict observations; vectorised over leading axes, for HER).
+
+        The shape term is recomputed from the float32 goals (:meth:`goal_shape_term`); the force and
+        smoothness terms come from ``info["reward_force"]`` and ``info["reward_smooth"]`` (a dict, or
+        an array or list of dicts, one per goal).
+        """
+        shape = self.goal_shape_term(achieved_goal, desired_goal)
+        if isinstance(info, dict):
+            return shape + (info.get("reward_force", 0.0) + info.get("reward_smooth", 0.0))
+        extra = np.array([i.get("reward_force", 0.0) + i.get("reward_smooth", 0.0) for i in np.ravel(info)])
+        return shape + extra.reshape(np.shape(info))
+
+    # -- episodes -------------------------------------------------------------------------------
+
+    def start_episodes(self, rngs: list[np.random.Generator], targets: list[np.ndarray | None] | None = None) -> Episodes:
+        """Draw one target per generator (or take the given force features) and precompute the episode."""
+        n = len(rngs)
+        given = targets or [None] * n
+        target = np.stack([t if t is not None else self.family.sample(rng) for rng, t in zip(rngs, given)])
+        if self.task_kind == "reach":
+            features = target[:, None, :]
+        else:
+            features = np.stack([target_schedule("procedure", t, self.start_insertion, self.horizon) for t in target])
+        T = features.shape[1]
+        target_b = self.response(features.reshape(n * T, 4)).reshape(n, T, self.k)
+        r = target_b - self.b_rest
+        sq_ref = np.maximum(np.sum(r * r, axis=-1), self.floor_sq)
+        zero_ratio = np.sqrt(np.sum(r * r, axis=-1) / sq_ref)                    # b stays at rest
+        steps = np.minimum(np.arange(self.horizon), T - 1)
+        zero_cum = np.cumsum(zero_ratio[:, steps], axis=1)
+        return Episodes(features, target_b, sq_ref, zero_cum, np.cumsum(self._oracle_ratio(target_b, sq_ref, steps), axis=1))
+
+    def _oracle_ratio(self, target_b: np.ndarray, sq_ref: np.ndarray, steps: np.ndarray) -> np.ndarray:
+        """Error ratio at each step of the oracle, which holds the target force from the start."""
+        n = target_b.shape[0]
+        if not self.dynamics.stateful:
+            return np.zeros((n, self.horizon))                      # the shape is the target at once
+        if target_b.shape[1] == 1:
+            # constant target: b_t - g = (1 - r) (1 - move)^t (b_rest - g), in closed form
+            decay = (1.0 - self.dynamics.move) ** (np.arange(self.horizon) + 1.0)
+            r = target_b[:, 0] - self.b_rest
+            start = np.sqrt(np.sum(r * r, axis=-1) / sq_ref[:, 0])
+            return self.dynamics.one_minus_r * start[:, None] * decay[None, :]
+        oracle = np.empty((n, self.horizon))
+        z = np.repeat(self.b_rest[None], n, axis=0)
+        for t in range(self.horizon):                               # moving target: simulate
+            g = target_b[:, steps[t]]
+            d = self.dynamics.step(z, g) - g
+            oracle[:, t] = np.sqrt(np.sum(d * d, axis=-1) / sq_ref[:, steps[t]])
+        return oracle
+
+    def target_from_action(self, value: Any, name: str = "options['target']") -> np.ndarray:
+        """Force features of a target given in action units (checked to lie in the target family)."""
+        a = np.asarray(value, dtype=np.float64)
+        if a.shape != (4,) or not np.isfinite(a).all():
+            raise ValueError(f"{name} must be 4 finite numbers in action units [-1, 1], got {value!r}")
+        f = self.device.features(a)
+        tol = 1e-9 * (self.family.high - self.family.low + 1e-12)
+        if ((f < self.family.low - tol) | (f > self.family.high + tol)).any():
+            raise ValueError(f"{name}={a.tolist()} maps to force features {f.tolist()}, outside the target family "
+                             f"[{self.family.low.tolist()}, {self.family.high.tolist()}]")
+        return np.clip(f, self.family.low, self.family.high)
+
+    def score(self, zero_cum: Any, oracle_cum: Any, agent_cum: Any) -> Any:
+        """Normalised score: 0 for the zero-force policy, 100 for the oracle (shape term only)."""
+        return 100.0 * (zero_cum - agent_cum) / np.maximum(zero_cum - oracle_cum, 1e-12)
