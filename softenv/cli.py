@@ -102,6 +102,48 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
     bench.run(args.quick, Path(args.out), args.only, command="softenv " + " ".join(argv))
 
 
+def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
+    from . import bench
+
+    if not bench.threads_pinned():
+        bench.reexec_single_threaded(argv)
+    try:
+        from baselines import benchmark
+    except ImportError as exc:
+        raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {exc}") from exc
+    plan = benchmark.quick_plan() if args.quick else benchmark.full_plan()
+    if args.scenes:
+        plan.scenes = args.scenes
+        plan.seeds = {s: plan.seeds.get(s, 5 if s == "SoftSphere-v0" else 3) for s in args.scenes}
+    if args.policies is not None:
+        plan.baselines = args.policies
+    if args.agents is not None:
+        plan.agents = args.agents
+    if args.episodes:
+        plan.episodes = args.episodes
+    if args.quick:
+        print(f"softenv compare --quick: SoftSphere-v0 test targets, {plan.episodes} episodes per policy; agents "
+              f"trained now for {plan.timesteps} env steps (1 seed) -- short budgets, not the full benchmark")
+    benchmark.run(plan, Path(args.out), Path(args.runs), "softenv " + " ".join(argv),
+                  stem="benchmark_quick" if args.quick else "benchmark")
+
+
+def cmd_score(args: argparse.Namespace) -> None:
+    from .scoring import score_file
+
+    scene = {"dynamics": {"kind": "viscoelastic"}} if args.scene == "viscoelastic" else {}
+    if args.law != "linear":
+        scene["tissue"] = {"law": args.law}
+    report = score_file(args.trajectory, scene, args.out)
+    m = report["metrics"]
+    ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
+    print(f"{args.trajectory}: score {report['score']:.1f}/100 (accuracy {report['accuracy']:.2f}, speed "
+          f"{report['speed']:.2f}, safety {report['safety']:.2f}, smoothness {report['smoothness']:.2f}); final error "
+          f"{m['final_error_mm']:.3f} mm, time to target {ttt}, peak force {m['peak_force_N']:.1f} N")
+    if args.out:
+        print(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .response import REGRESSORS
 
@@ -140,6 +182,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")
     p.add_argument("--out", default="results", help="output directory (default: results)")
     p.add_argument("--only", nargs="+", help="run only these sections")
+
+    p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
+    p.add_argument("--quick", action="store_true", help="SoftSphere-v0 only, short agent training (minutes)")
+    p.add_argument("--scenes", nargs="+", help="benchmark scenes (default: all in full mode)")
+    p.add_argument("--policies", nargs="*", help="baseline policies (default: all)")
+    p.add_argument("--agents", nargs="*", help="SB3 agents: ppo sac td3 sac-her (default: quick ppo sac; full all)")
+    p.add_argument("--episodes", type=int, help="test episodes per policy and scene (default 100)")
+    p.add_argument("--out", default="results", help="report directory (default: results)")
+    p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
+
+    p = sub.add_parser("score", help="score a recorded trainee trajectory (CSV or NPZ) against the expert")
+    p.add_argument("trajectory", help="file with columns time_s, insertion_deg, lateral_deg, normal_N, sideways_N")
+    p.add_argument("--scene", choices=["quasi_static", "viscoelastic"], default="quasi_static")
+    p.add_argument("--law", choices=["linear", "stiffening"], default="linear")
+    p.add_argument("--out", help="write <name>_score.json, .md and .png here")
     return parser
 
 
@@ -153,6 +210,10 @@ def main(argv: list[str] | None = None) -> int:
             cmd_fit(args)
         elif args.command == "bench":
             cmd_bench(args, argv)
+        elif args.command == "compare":
+            cmd_compare(args, argv)
+        elif args.command == "score":
+            cmd_score(args)
     except ValueError as exc:
         print(f"softenv {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -20,6 +20,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "decode": ("softenv.bench.shape", "bench_decode"),
     "fit": ("softenv.bench.shape", "bench_fit"),
     "response": ("softenv.bench.response", "bench_response"),
+    "env": ("softenv.bench.env", "bench_env"),
 }
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")

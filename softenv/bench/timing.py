@@ -101,21 +101,28 @@ def machine_info() -> dict[str, Any]:
             "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
 
 
+def gym_step_timing(env: Any, actions: list, steps: int, repeats: int = 5, seed: int = 0) -> Timing:
+    """Seconds per ``env.step`` over pre-sampled ``actions`` (cycled), resetting when an episode ends."""
+    env.reset(seed=seed)
+    per_rep = max(1, steps // repeats)
+    n = len(actions)
+    samples = np.empty(repeats + 1)
+    for r in range(repeats + 1):                     # the first repeat warms up and is dropped
+        t0 = time.perf_counter()
+        for i in range(per_rep):
+            _, _, terminated, truncated, _ = env.step(actions[i % n])
+            if terminated or truncated:
+                env.reset()
+        samples[r] = (time.perf_counter() - t0) / per_rep
+    return Timing(samples[1:])
+
+
 def cartpole_steps_per_second(steps: int = 100_000, seed: int = 0) -> Timing:
     """Gymnasium's CartPole-v1 through ``gym.make`` with pre-sampled actions: the in-process reference."""
     import gymnasium as gym
 
     env = gym.make("CartPole-v1")
-    env.reset(seed=seed)
     actions = np.random.default_rng(seed).integers(0, 2, size=4096).tolist()
-    per_rep = steps // 5
-    samples = np.empty(5)
-    for r in range(5):
-        t0 = time.perf_counter()
-        for i in range(per_rep):
-            _, _, terminated, truncated, _ = env.step(actions[i & 4095])
-            if terminated or truncated:
-                env.reset()
-        samples[r] = (time.perf_counter() - t0) / per_rep
+    timing = gym_step_timing(env, actions, steps, seed=seed)
     env.close()
-    return Timing(samples)
+    return timing

@@ -1,0 +1,168 @@
+"""SB3 agents on SoftSphere: hyper-parameters from rl-zoo-style YAML, training on the batched twin
+with CSV/TensorBoard logs, evaluation on the test targets, checkpoints and resume; saved agents
+carry their scene and observation layout, checked on load."""
+
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from softenv.envs.config import config_key, make_config
+
+from .evaluate import scene_kwargs
+from .policies import SB3Policy
+
+HYPERPARAMS = Path(__file__).parent / "hyperparams"
+# name -> (SB3 class name, YAML file, observation mode)
+ALGOS: dict[str, tuple[str, str, str]] = {
+    "ppo": ("PPO", "ppo.yml", "vector"),
+    "sac": ("SAC", "sac.yml", "vector"),
+    "td3": ("TD3", "td3.yml", "vector"),
+    "sac-her": ("SAC", "her.yml", "dict"),
+}
+AGENT_FORMAT_VERSION = 1
+
+
+def _literal_dict(text: str) -> dict[str, Any]:
+    """Parse rl-zoo's ``"dict(a=1, b=[2, 3])"`` strings without eval: literals only."""
+    node = ast.parse(text, mode="eval").body
+    if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args):
+        raise ValueError(f"expected dict(key=literal, ...), got {text!r}")
+    return {kw.arg: ast.literal_eval(kw.value) for kw in node.keywords}
+
+
+def hyperparams(algo: str, env_id: str) -> dict[str, Any]:
+    """The YAML hyper-parameters of ``algo`` on ``env_id`` (a fresh dict)."""
+    import yaml
+
+    if algo not in ALGOS:
+        raise ValueError(f"unknown agent {algo!r}; valid agents: {list(ALGOS)}")
+    table = yaml.safe_load((HYPERPARAMS / ALGOS[algo][1]).read_text())
+    if env_id not in table:
+        raise ValueError(f"{ALGOS[algo][1]} has no entry for {env_id!r}; entries: {list(table)}")
+    params = dict(table[env_id])
+    for key in ("policy_kwargs", "replay_buffer_kwargs"):
+        if isinstance(params.get(key), str):
+            params[key] = _literal_dict(params[key])
+    return params
+
+
+def _layout(scene: str, obs_mode: str) -> dict[str, Any]:
+    env_id, kwargs = scene_kwargs(scene, obs_mode)
+    kwargs.pop("obs_mode")
+    config = make_config(**kwargs)
+    return {"scene": scene, "obs_mode": obs_mode,
+            "scene_key": config_key(config, ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task"))}
+
+
+def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") -> Any:
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from softenv.envs.sb3 import SoftSphereSB3VecEnv
+
+    env_id, kwargs = scene_kwargs(scene, ALGOS[algo][2])
+    kwargs["task"] = {**kwargs["task"], "split": split}
+    return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, **kwargs))
+
+
+def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
+                progress: bool = True, eval_episodes: int = 20, resume: bool = True) -> Path:
+    """Train (or resume) one agent; returns the path of the final model (``model.zip``)."""
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.logger import configure
+
+    env_id = scene_kwargs(scene)[0]
+    params = hyperparams(algo, env_id)
+    n_envs = int(params.pop("n_envs", 1))
+    budget = int(timesteps if timesteps is not None else params.pop("n_timesteps"))
+    params.pop("n_timesteps", None)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    final = out / "model.zip"
+    if final.exists() and resume:
+        return final
+    env = make_training_env(algo, scene, n_envs)
+    cls = getattr(sb3, ALGOS[algo][0])
+    if params.get("replay_buffer_class") == "HerReplayBuffer":
+        from stable_baselines3 import HerReplayBuffer
+
+        params["replay_buffer_class"] = HerReplayBuffer
+    noise_type, noise_std = params.pop("noise_type", None), params.pop("noise_std", 0.1)
+    if noise_type == "normal":
+        from stable_baselines3.common.noise import NormalActionNoise
+
+        params["action_noise"] = NormalActionNoise(np.zeros(4), noise_std * np.ones(4))
+    checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    if checkpoints and resume:
+        model = cls.load(checkpoints[-1], env=env, device="cpu")
+        buffer = checkpoints[-1].with_name(checkpoints[-1].stem.replace("agent_", "agent_replay_buffer_") + ".pkl")
+        if buffer.exists() and hasattr(model, "load_replay_buffer"):
+            model.load_replay_buffer(buffer)
+    else:
+        model = cls(params.pop("policy"), env, seed=seed, device="cpu", verbose=0, **params)
+    formats = ["csv"]
+    try:
+        import tensorboard  # noqa: F401
+
+        formats.append("tensorboard")
+    except ImportError:
+        pass
+    model.set_logger(configure(str(out / "logs"), formats))
+    eval_env = make_training_env(algo, scene, min(eval_episodes, 10), split="test")
+    callbacks = CallbackList([
+        EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
+                     log_path=str(out / "eval"), best_model_save_path=str(out / "best"), verbose=0),
+        CheckpointCallback(max(budget // (4 * n_envs), 1), str(out / "checkpoints"), name_prefix="agent",
+                           save_replay_buffer=hasattr(model, "replay_buffer")),
+    ])
+    model.learn(budget - model.num_timesteps, callback=callbacks, progress_bar=progress and _has_progress_bar(),
+                reset_num_timesteps=False)
+    model.save(final)
+    meta = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
+            **_layout(scene, ALGOS[algo][2])}
+    (out / "agent.json").write_text(json.dumps(meta, indent=2))
+    env.close()
+    eval_env.close()
+    return final
+
+
+def load_agent(path: str | Path, scene: str) -> SB3Policy:
+    """Load an agent saved by :func:`train_agent` for ``scene``; another scene or layout is an error."""
+    import stable_baselines3 as sb3
+
+    path = Path(path)
+    meta_path = path.parent / "agent.json"
+    if not meta_path.exists():
+        raise ValueError(f"{str(path)!r} has no agent.json beside it (format and scene unknown)")
+    meta = json.loads(meta_path.read_text())
+    if meta.get("format_version") != AGENT_FORMAT_VERSION:
+        raise ValueError(f"{str(meta_path)!r}: format_version={meta.get('format_version')!r}; "
+                         f"this softenv reads {AGENT_FORMAT_VERSION}")
+    algo = meta.get("algo")
+    if algo not in ALGOS:
+        raise ValueError(f"{str(meta_path)!r}: unknown agent {algo!r}; valid agents: {list(ALGOS)}")
+    wanted = _layout(scene, ALGOS[algo][2])
+    for key in ("scene_key", "obs_mode"):
+        if meta.get(key) != wanted[key]:
+            raise ValueError(f"agent {str(path)!r} was trained for scene {meta.get('scene')!r} "
+                             f"({key}={meta.get(key)!r}); asked for scene {scene!r} ({key}={wanted[key]!r})")
+    # HER's replay buffer needs an env to rebuild itself, even for inference
+    env = make_training_env(algo, scene, 1, split="test") if algo == "sac-her" else None
+    model = getattr(sb3, ALGOS[algo][0]).load(path, env=env, device="cpu")
+    policy = SB3Policy(model, algo)
+    policy.obs_mode = ALGOS[algo][2]
+    return policy
+
+
+def _has_progress_bar() -> bool:
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True

@@ -1,0 +1,258 @@
+"""``softenv compare``: every baseline and agent on the benchmark's scenes, as a table with 95 %
+bootstrap intervals, a CSV, an error-against-decision-time plot, learning curves and a gallery.
+
+Quick mode (``--quick``): SoftSphere-v0 only, every baseline, and the four agents trained briefly
+in this run, one seed each (budgets printed); minutes on two cores. Full mode: the six scenes, every baseline, the
+four agents with their YAML budgets over 5 training seeds on SoftSphere-v0 and 3 elsewhere.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from softenv.envs.config import make_config
+from softenv.envs.world import World
+
+from .agents import ALGOS, hyperparams, load_agent, train_agent
+from .evaluate import METRICS, SCENES, Episodes, evaluate, scene_kwargs
+from .policies import BASELINES, make_baseline
+
+
+@dataclass
+class Plan:
+    scenes: list[str]
+    baselines: list[str]
+    agents: list[str]
+    seeds: dict[str, int]                              # scene -> training seeds per agent
+    timesteps: dict[str, int | None] = field(default_factory=dict)   # agent -> budget (None: YAML)
+    episodes: int = 100
+
+
+def quick_plan() -> Plan:
+    return Plan(["SoftSphere-v0"], list(BASELINES), list(ALGOS), {"SoftSphere-v0": 1},
+                {"ppo": 100_000, "sac": 20_000, "td3": 20_000, "sac-her": 20_000})
+
+
+def full_plan() -> Plan:
+    return Plan(list(SCENES), list(BASELINES), list(ALGOS), {s: 5 if s == "SoftSphere-v0" else 3 for s in SCENES})
+
+
+def check_names(plan: Plan) -> None:
+    for name in plan.scenes:
+        if name not in SCENES:
+            raise ValueError(f"unknown scene {name!r}; valid scenes: {list(SCENES)}")
+    for name in plan.baselines:
+        if name not in BASELINES:
+            raise ValueError(f"unknown policy {name!r}; valid baselines: {list(BASELINES)}")
+    for name in plan.agents:
+        if name not in ALGOS:
+            raise ValueError(f"unknown agent {name!r}; valid agents: {list(ALGOS)}")
+
+
+def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[[str], None] = print,
+        write: bool = True, stem: str = "benchmark") -> list[dict[str, Any]]:
+    """Evaluate the plan; print the table; write the reports when ``write``."""
+    check_names(plan)
+    import torch
+
+    torch.set_num_threads(1)
+    started = time.perf_counter()
+    summaries: list[dict[str, Any]] = []
+    timings: dict[str, float] = {}
+    for scene in plan.scenes:
+        env_id, kwargs = scene_kwargs(scene)
+        kwargs.pop("obs_mode")
+        world = World(make_config(**kwargs))
+        for name in plan.baselines:
+            t0 = time.perf_counter()
+            policy = make_baseline(name, world)
+            episodes = evaluate(policy, scene, plan.episodes)
+            summaries.append(_with(episodes.summary(), kind="baseline", seeds=1))
+            timings[f"{scene} {name}"] = time.perf_counter() - t0
+            echo(_line(summaries[-1], time.perf_counter() - started))
+        for algo in plan.agents:
+            t0 = time.perf_counter()
+            pooled: list[Episodes] = []
+            for seed in range(plan.seeds[scene]):
+                run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
+                budget = plan.timesteps.get(algo)
+                path = train_agent(algo, scene, seed, run_dir, budget, progress=False)
+                pooled.append(evaluate(load_agent(path, scene), scene, plan.episodes))
+            values = {m: np.concatenate([e.values[m] for e in pooled]) for m in METRICS}
+            merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
+            budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
+            summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=plan.seeds[scene]))
+            timings[f"{scene} {algo}"] = time.perf_counter() - t0
+            echo(_line(summaries[-1], time.perf_counter() - started))
+    elapsed = time.perf_counter() - started
+    echo("")
+    echo(format_table(summaries))
+    echo(f"\n{len(summaries)} policy x scene cells in {elapsed:.0f} s")
+    if write:
+        write_reports(summaries, plan, out_dir, runs_dir, command, elapsed, timings, stem)
+    return summaries
+
+
+def _with(summary: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    summary.update(extra)
+    return summary
+
+
+def _fmt(m: dict[str, float], digits: int = 2) -> str:
+    if not np.isfinite(m["mean"]):
+        return "-"
+    return f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, {m['ci_high']:.{digits}f}]"
+
+
+def _line(s: dict[str, Any], elapsed: float) -> str:
+    return (f"[{elapsed:6.0f} s] {s['scene']:38s} {s['policy']:14s} score {_fmt(s['normalized_score'], 1):22s} "
+            f"error {s['final_error_mm']['mean']:.3f} mm  success {s['success']['mean']:.2f}")
+
+
+HEADER = ["scene", "policy", "kind", "normalized score", "IQM score", "final error (mm)", "success rate",
+          "steps to success", "peak force (N)", "decision (us)"]
+
+
+def format_table(summaries: list[dict[str, Any]]) -> str:
+    lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    for s in summaries:
+        cells = [s["scene"], s["policy"], s["kind"], _fmt(s["normalized_score"], 1), f"{s['normalized_score']['iqm']:.1f}",
+                 _fmt(s["final_error_mm"], 3), _fmt(s["success"], 2), _fmt(s["steps_to_success"], 1),
+                 _fmt(s["peak_force_N"], 1), f"{s['decision_us']:.0f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def provenance(command: str) -> dict[str, Any]:
+    import gymnasium
+    import stable_baselines3
+    import torch
+
+    import softenv
+
+    return {"command": command, "softenv": softenv.__version__, "numpy": np.__version__,
+            "gymnasium": gymnasium.__version__, "stable_baselines3": stable_baselines3.__version__,
+            "torch": torch.__version__, "python": platform.python_version(), "machine": platform.processor() or
+            platform.machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+
+
+def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir: Path, command: str,
+                  elapsed: float, timings: dict[str, float], stem: str = "benchmark") -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    prov = provenance(command)
+    with open(out_dir / f"{stem}.csv", "w", newline="") as fh:
+        fh.write(f"# made by: {command} ({prov['date']}; softenv {prov['softenv']}, sb3 {prov['stable_baselines3']})\n")
+        writer = csv.writer(fh)
+        writer.writerow(["scene", "policy", "kind", "seeds", "episodes", "decision_us"] +
+                        [f"{m}_{q}" for m in METRICS for q in ("mean", "ci_low", "ci_high", "iqm")])
+        for s in summaries:
+            writer.writerow([s["scene"], s["policy"], s["kind"], s["seeds"], s["episodes"], f"{s['decision_us']:.1f}"] +
+                            [f"{s[m][q]:.6g}" for m in METRICS for q in ("mean", "ci_low", "ci_high", "iqm")])
+    (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries,
+                                                       "timings_s": timings}, indent=1, default=float))
+    budgets = {a: plan.timesteps.get(a) or {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes}
+               for a in plan.agents}
+    md = [f"# Benchmark: baselines and agents on SoftSphere\n",
+          f"Made by `{command}` in {elapsed / 60:.1f} min ({prov['date']}; {prov['machine']}, single-threaded torch "
+          f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
+          f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
+          f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
+          f"agents, pooled); training seeds per agent: {plan.seeds}; agent budgets (env steps): {budgets}. Cells: "
+          "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 0 = zero force, 100 = exact "
+          "oracle (episode's cumulative shape error). Decision time: one observation, median.\n",
+          format_table(summaries), "",
+          f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times), "
+          f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
+    (out_dir / f"{stem}.md").write_text("\n".join(md) + "\n")
+    _plots(summaries, plan, out_dir, runs_dir, command, stem)
+
+
+def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir: Path, command: str, stem: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(plan.scenes), figsize=(4.2 * len(plan.scenes), 3.8), squeeze=False)
+    for ax, scene in zip(axes[0], plan.scenes):
+        for s in (s for s in summaries if s["scene"] == scene):
+            e = s["final_error_mm"]
+            ax.errorbar(max(s["decision_us"], 0.5), e["mean"], yerr=[[e["mean"] - e["ci_low"]], [e["ci_high"] - e["mean"]]],
+                        fmt="o" if s["kind"] == "baseline" else "s", ms=4, capsize=2)
+            ax.annotate(s["policy"], (max(s["decision_us"], 0.5), e["mean"]), fontsize=6, xytext=(3, 2),
+                        textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_xlabel("decision time per step (us)")
+        ax.set_ylabel("final shape error (mm)")
+        ax.set_title(scene, fontsize=8)
+    fig.suptitle(f"error against decision time -- {command}", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out_dir / _error_plot_name(stem), dpi=120)
+    plt.close(fig)
+    _learning_curves(plan, out_dir / f"{stem}_learning_curves.png", runs_dir, command, plt)
+    _gallery(out_dir / f"{stem}_gallery.png", command, plt)
+
+
+def _error_plot_name(stem: str) -> str:
+    return "policy_error_vs_runtime.png" if stem == "benchmark" else f"{stem}_error_vs_runtime.png"
+
+
+def _learning_curves(plan: Plan, path: Path, runs_dir: Path, command: str, plt: Any) -> None:
+    fig, axes = plt.subplots(1, len(plan.scenes), figsize=(4.2 * len(plan.scenes), 3.4), squeeze=False)
+    for ax, scene in zip(axes[0], plan.scenes):
+        for algo in plan.agents:
+            curves = []
+            for seed in range(plan.seeds[scene]):
+                log = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}" / "eval" / "evaluations.npz"
+                if log.exists():
+                    with np.load(log, allow_pickle=False) as data:
+                        curves.append((data["timesteps"], data["results"].mean(axis=1)))
+            if not curves:
+                continue
+            n = min(len(c[0]) for c in curves)
+            steps, values = curves[0][0][:n], np.stack([c[1][:n] for c in curves])
+            mean = values.mean(axis=0)
+            half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.zeros_like(mean)
+            ax.plot(steps, mean, label=f"{algo} ({len(values)} seeds)")
+            ax.fill_between(steps, mean - half, mean + half, alpha=0.25)
+        ax.set_xlabel("env steps")
+        ax.set_ylabel("test-target episode return")
+        ax.set_title(scene, fontsize=8)
+        ax.legend(fontsize=6)
+    fig.suptitle(f"learning curves (mean, 95 % band over seeds) -- {command}", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _gallery(path: Path, command: str, plt: Any) -> None:
+    """Final shapes against targets on one test episode of SoftSphere-v0, for a few baselines."""
+    import gymnasium as gym
+
+    names = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle"]
+    env_id, kwargs = scene_kwargs("SoftSphere-v0")
+    kwargs.pop("obs_mode")
+    world = World(make_config(**kwargs))
+    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 2.6))
+    for ax, name in zip(axes, names):
+        env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+        policy = make_baseline(name, world)
+        obs, _ = env.reset(seed=3)
+        for _ in range(20):
+            obs, _, _, _, info = env.step(policy.predict(obs))
+        ax.imshow(env.render())
+        ax.set_title(f"{name}\n{info['shape_error_mm']:.2f} mm", fontsize=7)
+        ax.axis("off")
+        env.close()
+    fig.suptitle(f"final shape (colour: displacement) and target (wireframe) -- {command}", fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,115 @@
+"""The evaluation protocol: test targets only, many episodes at once on the batched twin, per-episode
+metrics, and rliable-style summaries (mean with a 95 % bootstrap interval, interquartile mean)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from softenv.envs import ENV_SCENES
+
+METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
+
+# benchmark scenes: name -> (env id, scene overrides); nonlinear variants where the law matters
+SCENES: dict[str, tuple[str, dict[str, Any]]] = {
+    "SoftSphere-v0": ("SoftSphere-v0", {}),
+    "SoftSphere-v0/stiffening": ("SoftSphere-v0", {"tissue": {"law": "stiffening"}}),
+    "SoftSphereViscoelastic-v0": ("SoftSphereViscoelastic-v0", {}),
+    "SoftSphereViscoelastic-v0/stiffening": ("SoftSphereViscoelastic-v0", {"tissue": {"law": "stiffening"}}),
+    "SoftSphereProcedure-v0": ("SoftSphereProcedure-v0", {}),
+    "SoftSphereProcedure-v0/stiffening": ("SoftSphereProcedure-v0", {"tissue": {"law": "stiffening"}}),
+}
+
+
+def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, Any]]:
+    """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets."""
+    if scene not in SCENES:
+        raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
+    env_id, overrides = SCENES[scene]
+    kwargs = {**ENV_SCENES[env_id], **overrides}
+    kwargs["task"] = {**kwargs.get("task", {}), "split": "test"}
+    return env_id, {**kwargs, "obs_mode": obs_mode}
+
+
+@dataclass
+class Episodes:
+    """Per-episode metrics of one policy on one scene."""
+
+    policy: str
+    scene: str
+    values: dict[str, np.ndarray]
+    decision_us: float
+
+    def summary(self, seed: int = 0) -> dict[str, Any]:
+        out: dict[str, Any] = {"policy": self.policy, "scene": self.scene, "episodes": len(self.values["success"]),
+                               "decision_us": self.decision_us}
+        for name in METRICS:
+            v = self.values[name].astype(np.float64)
+            finite = v[np.isfinite(v)]
+            mean, lo, hi = bootstrap_ci(finite, seed=seed)
+            out[name] = {"mean": mean, "ci_low": lo, "ci_high": hi, "iqm": iqm(finite), "n": int(finite.size)}
+        return out
+
+
+def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000) -> Episodes:
+    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin)."""
+    env_id, kwargs = scene_kwargs(scene, getattr(policy, "obs_mode", "vector"))
+    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
+                        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
+    policy.reset()
+    obs, _ = venv.reset(seed=seed)
+    done = np.zeros(episodes, dtype=bool)
+    first_success = np.full(episodes, np.nan)
+    final: dict[str, np.ndarray] = {}
+    step = 0
+    while not done.all():
+        obs, _, terminated, truncated, info = venv.step(policy.predict(obs))
+        step += 1
+        running = ~done
+        success_now = np.where(info.get("_is_success", np.zeros(episodes, bool)), info.get("is_success", False), False)
+        ended = (terminated | truncated) & running
+        if ended.any():
+            fi = info["final_info"]
+            success_now = np.where(ended, fi["is_success"], success_now)
+            for key in ("shape_error_mm", "is_success", "normalized_score", "peak_force_N"):
+                final.setdefault(key, np.zeros(episodes, dtype=fi[key].dtype))[ended] = fi[key][ended]
+        first_success = np.where(running & success_now & np.isnan(first_success), step, first_success)
+        done |= ended
+    values = {"final_error_mm": final["shape_error_mm"], "success": final["is_success"].astype(np.float64),
+              "normalized_score": final["normalized_score"], "steps_to_success": first_success,
+              "peak_force_N": final["peak_force_N"]}
+    return Episodes(getattr(policy, "name", str(policy)), scene, values, decision_latency_us(policy, obs))
+
+
+def decision_latency_us(policy: Any, obs: np.ndarray, calls: int = 200) -> float:
+    """Median time of one decision on one observation row (the haptic-loop latency)."""
+    n = len(obs) if isinstance(obs, np.ndarray) else len(obs["observation"])
+    samples = np.empty(calls)
+    for i in range(calls):
+        row = obs[i % n] if isinstance(obs, np.ndarray) else {key: v[i % n] for key, v in obs.items()}
+        t0 = time.perf_counter()
+        policy.predict(row)
+        samples[i] = time.perf_counter() - t0
+    return float(np.median(samples) * 1e6)
+
+
+def bootstrap_ci(values: np.ndarray, n_boot: int = 2000, seed: int = 0) -> tuple[float, float, float]:
+    """Mean and its 95 % percentile-bootstrap interval."""
+    if values.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    means = values[rng.integers(0, values.size, (n_boot, values.size))].mean(axis=1)
+    return float(values.mean()), float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def iqm(values: np.ndarray) -> float:
+    """Interquartile mean: the mean of the middle 50 % (rliable's robust aggregate)."""
+    if values.size == 0:
+        return float("nan")
+    v = np.sort(values)
+    lo, hi = int(np.floor(0.25 * v.size)), int(np.ceil(0.75 * v.size))
+    return float(v[lo:max(hi, lo + 1)].mean())

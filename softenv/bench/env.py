@@ -1,0 +1,104 @@
+"""Benchmarks of the environments: single-env steps through ``gym.make`` against CartPole-v1, the
+batched twin's throughput and memory per env, reset cost, scene build, table error, rendering."""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+
+import gymnasium as gym
+import numpy as np
+
+from ..envs import ENV_SCENES
+from .timing import Row, Timing, gym_step_timing, measure, spread_us
+
+
+def bench_env(quick: bool, reference: Timing) -> list[Row]:
+    rows: list[Row] = []
+    t0 = time.perf_counter()
+    env = gym.make("SoftSphere-v0")
+    rows.append(Row("env", "SoftSphere-v0: first gym.make in this process (scene from the disk cache or built)",
+                    time.perf_counter() - t0, "s"))
+    scene = env.unwrapped.world.scene
+    err = scene.table_error(n=500)
+    rows.append(Row("env", "exact response: table vs direct analytic tissue, surface RMS error",
+                    err["median_mm"], "mm (median)", f"p99 {err['p99_mm']:.4f}, max {err['max_mm']:.4f} mm",
+                    extra={"nodes": list(scene.response.nodes), "table_mb": scene.response.values_.nbytes / 1e6}))
+    cart = 1.0 / reference.median
+    steps = 40_000 if quick else 200_000
+    for env_id in ENV_SCENES:
+        env = gym.make(env_id)
+        actions = [env.action_space.sample() for _ in range(4096)]
+        t = gym_step_timing(env, actions, steps)
+        rate = 1.0 / t.median
+        is_target = env_id == "SoftSphere-v0"
+        rows.append(Row("env", f"{env_id}: step via gym.make (pre-sampled actions, resets included)",
+                        rate / cart, "x CartPole-v1", f"{rate:,.0f} steps/s, IQR {1 / t.p75:,.0f}-{1 / t.p25:,.0f}",
+                        ">= 0.4x" if is_target else "", rate / cart >= 0.4 if is_target else None))
+        r = measure(lambda: env.reset(), number=200 if quick else 1000, repeats=5)
+        rows.append(Row("env", f"{env_id}: reset", r.median * 1e6, "us", spread_us(r)))
+    rows += _vector_rows(quick)
+    rows += _render_rows(quick)
+    return rows
+
+
+def _vector_rows(quick: bool) -> list[Row]:
+    rows = []
+    n = 1024
+    for env_id in ENV_SCENES:
+        venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+        venv.reset(seed=0)
+        actions = [venv.action_space.sample() for _ in range(16)]
+        calls = 20 if quick else 100
+        samples = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            for i in range(calls):
+                venv.step(actions[i % 16])
+            samples.append((time.perf_counter() - t0) / calls)
+        t = Timing(np.array(samples))
+        rate = n / t.median
+        is_target = env_id == "SoftSphere-v0"
+        rows.append(Row("env", f"{env_id}: batched twin, {n} envs", rate, "env-steps/s",
+                        f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}", ">= 1,000,000/s" if is_target else "",
+                        rate >= 1e6 if is_target else None))
+        per_env = _state_bytes_per_env(env_id, n)
+        rows.append(Row("env", f"{env_id}: batched twin state per env (traced allocations, {n} envs)",
+                        per_env / 1e3, "KB", target="<= 200 KB", ok=per_env <= 200e3))
+    return rows
+
+
+def _state_bytes_per_env(env_id: str, n: int) -> float:
+    """Memory the twin allocates per env beyond the shared scene: two sizes, differenced."""
+    sizes = []
+    for count in (n // 4, n):
+        gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point")   # scene memoised first
+        tracemalloc.start()
+        venv = gym.make_vec(env_id, num_envs=count, vectorization_mode="vector_entry_point")
+        venv.reset(seed=0)
+        venv.step(venv.action_space.sample())
+        sizes.append(tracemalloc.get_traced_memory()[0])
+        tracemalloc.stop()
+        del venv
+    return (sizes[1] - sizes[0]) / (n - n // 4)
+
+
+def _render_rows(quick: bool) -> list[Row]:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return [Row("env", "rgb_array rendering: skipped (matplotlib not installed)", float("nan"), "",
+                    target="install softenv[viz]", ok=None)]
+    env = gym.make("SoftSphere-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+
+    def frame() -> None:
+        env.step(rng.uniform(-1, 1, 4).astype(np.float32))
+        env.render()
+
+    t = measure(frame, number=5 if quick else 20, repeats=5)
+    fps = 1.0 / t.median
+    env.close()
+    return [Row("env", "rgb_array frames at 441 points (320 px, step + render)", fps, "frames/s",
+                f"IQR {1 / t.p75:.1f}-{1 / t.p25:.1f}", ">= 10/s", fps >= 10)]

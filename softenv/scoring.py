@@ -1,0 +1,277 @@
+"""Trainee scoring: replay a recorded device trajectory through a scene and score it against the
+expert reference.
+
+Trajectory schema (CSV with a header row, or ``.npz`` with one array per column plus
+``format_version = 1``):
+
+| column | unit | allowed |
+|---|---|---|
+| ``time_s`` | s | finite, >= 0, strictly increasing |
+| ``insertion_deg`` | deg | within the scene's ``device.insertion_deg`` |
+| ``lateral_deg`` | deg | within +- ``device.lateral_deg`` |
+| ``normal_N`` | N | within [0, ``device.max_normal_force``] |
+| ``sideways_N`` | N | within +- ``device.max_sideways_force`` |
+
+Each row is a device command held until the next row (zero-order hold), sampled at the scene's
+control period ``dt``; the replay lasts until the last row's time. The target is the centre of the
+scene's laryngoscopy family (the same for every trainee). Errors name the row (1 = first data row)
+and the column.
+
+Score (0-100), written out in every report::
+
+    score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness)
+    accuracy   = clip(1 - final_error / rest_error, 0, 1)        rest_error: error with no force
+    speed      = clip(expert_time / time_to_target, 0, 1)       0 if the target is never reached
+    safety     = clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1)
+    smoothness = clip(expert_jerk / jerk, 0, 1)                 jerk: RMS third derivative of the force (N/s^3)
+
+``time_to_target``: first time the shape error falls under the scene's tolerance.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .envs.config import make_config
+
+COLUMNS = ("time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N")
+TRAJECTORY_VERSION = 1
+WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
+FORMULA = ("score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness); accuracy = clip(1 - final_error / "
+           "rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) (0 if never reached); safety = "
+           "clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1); smoothness = clip(expert_jerk / jerk, 0, 1)")
+
+
+@dataclass
+class Replay:
+    """A trajectory replayed through a scene: per-step series and the summary metrics."""
+
+    time_s: np.ndarray
+    error_mm: np.ndarray
+    force_N: np.ndarray
+    final_error_mm: float
+    rest_error_mm: float
+    time_to_target_s: float | None
+    peak_force_N: float
+    mean_force_N: float
+    force_time_integral_Ns: float
+    jerk_rms: float
+
+
+def load_trajectory(path: str | Path) -> np.ndarray:
+    """Read and validate the schema; returns an ``(n, 5)`` float array in ``COLUMNS`` order."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"trajectory {str(path)!r} does not exist")
+    if path.suffix == ".npz":
+        with np.load(path, allow_pickle=False) as data:
+            version = int(data["format_version"]) if "format_version" in data else None
+            if version != TRAJECTORY_VERSION:
+                raise ValueError(f"{str(path)!r}: format_version={version!r}; this softenv reads {TRAJECTORY_VERSION}")
+            missing = [c for c in COLUMNS if c not in data]
+            if missing:
+                raise ValueError(f"{str(path)!r}: missing columns {missing}; required: {list(COLUMNS)}")
+            table = np.stack([np.asarray(data[c], dtype=np.float64).ravel() for c in COLUMNS], axis=1)
+    elif path.suffix == ".csv":
+        with open(path, newline="") as fh:
+            rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
+        if not rows:
+            raise ValueError(f"{str(path)!r} is empty; expected a header {list(COLUMNS)}")
+        header = [h.strip() for h in rows[0]]
+        missing = [c for c in COLUMNS if c not in header]
+        if missing:
+            raise ValueError(f"{str(path)!r}: missing columns {missing}; header has {header}, required {list(COLUMNS)}")
+        index = [header.index(c) for c in COLUMNS]
+        table = np.empty((len(rows) - 1, len(COLUMNS)))
+        for i, row in enumerate(rows[1:], start=1):
+            for j, (col, k) in enumerate(zip(COLUMNS, index)):
+                try:
+                    table[i - 1, j] = float(row[k])
+                except (ValueError, IndexError):
+                    raise ValueError(f"{str(path)!r}: row {i}, column {col!r}: {row[k] if k < len(row) else ''!r} "
+                                     "is not a number") from None
+    else:
+        raise ValueError(f"trajectory {str(path)!r}: unknown format {path.suffix!r}; use .csv or .npz")
+    if len(table) < 2:
+        raise ValueError(f"{str(path)!r}: needs at least 2 rows, has {len(table)}")
+    bad = ~np.isfinite(table)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise ValueError(f"{str(path)!r}: row {i + 1}, column {COLUMNS[j]!r} = {table[i, j]!r} is not finite")
+    t = table[:, 0]
+    if t[0] < 0 or (np.diff(t) <= 0).any():
+        i = 0 if t[0] < 0 else int(np.argmax(np.diff(t) <= 0)) + 1
+        raise ValueError(f"{str(path)!r}: row {i + 1}, column 'time_s' = {t[i]!r}: times must be >= 0 and strictly increasing")
+    return table
+
+
+def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") -> None:
+    dev = config["device"]
+    limits = {"insertion_deg": dev["insertion_deg"], "lateral_deg": (-dev["lateral_deg"], dev["lateral_deg"]),
+              "normal_N": (0.0, dev["max_normal_force"]),
+              "sideways_N": (-dev["max_sideways_force"], dev["max_sideways_force"])}
+    for j, col in enumerate(COLUMNS[1:], start=1):
+        lo, hi = limits[col]
+        out = (table[:, j] < lo) | (table[:, j] > hi)
+        if out.any():
+            i = int(np.argmax(out))
+            raise ValueError(f"{source}: row {i + 1}, column {col!r} = {table[i, j]:g} is outside the device range "
+                             f"[{lo:g}, {hi:g}]")
+
+
+def to_actions(table: np.ndarray, config: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold resampling at ``dt``: step times and actions in ``[-1, 1]^4``."""
+    dt = config["dynamics"]["dt"]
+    n = max(1, int(math.floor(table[-1, 0] / dt + 1e-9)))
+    times = (np.arange(n) + 1) * dt
+    rows = np.searchsorted(table[:, 0], times - dt, side="right") - 1
+    rows = np.clip(rows, 0, len(table) - 1)
+    dev = config["device"]
+    lo = np.array([dev["insertion_deg"][0], -dev["lateral_deg"], 0.0, -dev["max_sideways_force"]])
+    hi = np.array([dev["insertion_deg"][1], dev["lateral_deg"], dev["max_normal_force"], dev["max_sideways_force"]])
+    actions = np.clip(2.0 * (table[rows, 1:] - lo) / (hi - lo) - 1.0, -1.0, 1.0)    # rounding only: ranges checked
+    return times, actions.astype(np.float32)
+
+
+def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
+    """Replay a validated trajectory through a reach scene whose target is the family centre."""
+    from .envs.soft_sphere import SoftSphereEnv
+
+    config = make_config(**(scene or {}))
+    check_ranges(table, config)
+    times, actions = to_actions(table, config)
+    overrides = {**(scene or {}), "task": {**(scene or {}).get("task", {}), "kind": "reach", "horizon": len(times)}}
+    env = SoftSphereEnv(**overrides)
+    world = env.world
+    centre = world.device.normalised((world.family.low + world.family.high) / 2)
+    env.reset(seed=0, options={"target": centre})
+    error, force = np.empty(len(times)), np.empty(len(times))
+    for i, a in enumerate(actions):
+        _, _, _, _, info = env.step(a)
+        error[i], force[i] = info["shape_error_mm"], info["force_N"]
+    ref = math.sqrt(max(float(np.sum((env._target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
+    reached = np.flatnonzero(error < world.tolerance * ref)
+    dt = config["dynamics"]["dt"]
+    features = world.device.features(actions.astype(np.float64))[:, 2:]
+    jerk = np.diff(features, n=3, axis=0) / dt ** 3 if len(features) > 3 else np.zeros((1, 2))
+    return Replay(times, error, force, float(error[-1]), ref, float(times[reached[0]]) if reached.size else None,
+                  float(force.max()), float(force.mean()), float(force.sum() * dt),
+                  float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))
+
+
+def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5.0, style: str = "expert") -> np.ndarray:
+    """A recorded-like trajectory of the laryngoscopy procedure toward the family centre.
+
+    ``expert``: insert (first 30 %), press (to 60 %), sweep (to 80 %), hold; smooth (cosine ramps).
+    ``too_forceful``: the same path pressing to the device's maximum with a 3 Hz tremor.
+    ``wrong_direction``: presses too shallow, off to the other side, and sweeps toward -y.
+    """
+    config = make_config(**(scene or {}))
+    task, dev = config["task"], config["device"]
+    target = np.array([np.mean(task["target_insertion_deg"]), np.mean(task["target_lateral_deg"]),
+                       np.mean(task["target_normal_force"]), np.mean(task["target_sideways_force"])])
+    start_insertion = dev["insertion_deg"][0]
+    if style == "wrong_direction":
+        target = np.array([start_insertion + 0.3 * (target[0] - start_insertion), -target[1] - 8.0, target[2],
+                           -target[3]])
+    t = np.arange(0.0, duration_s + 1e-9, 0.02)
+    ramp = lambda a, b: 0.5 - 0.5 * np.cos(np.pi * np.clip((t / duration_s - a) / (b - a), 0.0, 1.0))  # noqa: E731
+    insertion = start_insertion + (target[0] - start_insertion) * ramp(0.0, 0.3)
+    lateral = target[1] * ramp(0.0, 0.3)
+    normal = target[2] * (0.1 + 0.9 * ramp(0.3, 0.6)) * (t > 0)
+    sideways = target[3] * ramp(0.6, 0.8)
+    if style == "too_forceful":
+        normal = np.minimum(dev["max_normal_force"] * ramp(0.2, 0.3) * (1.0 + 0.15 * np.sin(2 * np.pi * 3.0 * t)),
+                            dev["max_normal_force"])
+    elif style not in ("expert", "wrong_direction"):
+        raise ValueError(f"style={style!r}; allowed: expert, too_forceful, wrong_direction")
+    lateral = np.clip(lateral, -dev["lateral_deg"], dev["lateral_deg"])
+    return np.stack([t, insertion, lateral, np.clip(normal, 0, dev["max_normal_force"]),
+                     np.clip(sideways, -dev["max_sideways_force"], dev["max_sideways_force"])], axis=1)
+
+
+def save_trajectory(table: np.ndarray, path: str | Path, note: str = "") -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as fh:
+        if note:
+            fh.write(f"# {note}\n")
+        writer = csv.writer(fh)
+        writer.writerow(COLUMNS)
+        for row in table:
+            writer.writerow([f"{v:.6g}" for v in row])
+
+
+def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float]:
+    parts = {
+        "accuracy": float(np.clip(1.0 - trainee.final_error_mm / trainee.rest_error_mm, 0.0, 1.0)),
+        "speed": 0.0 if trainee.time_to_target_s is None or expert.time_to_target_s is None
+        else float(np.clip(expert.time_to_target_s / trainee.time_to_target_s, 0.0, 1.0)),
+        "safety": float(np.clip(1.0 - max(trainee.peak_force_N - safe_force, 0.0) / safe_force, 0.0, 1.0)),
+        "smoothness": float(np.clip(expert.jerk_rms / max(trainee.jerk_rms, 1e-12), 0.0, 1.0)),
+    }
+    parts["score"] = 100.0 * sum(WEIGHTS[k] * parts[k] for k in WEIGHTS)
+    return parts
+
+
+def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
+    """Score a trajectory file; with ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``."""
+    config = make_config(**(scene or {}))
+    trainee = replay(load_trajectory(path), scene)
+    expert = replay(expert_trajectory(scene), scene)
+    parts = score(trainee, expert, config["reward"]["safe_force"])
+    summary = {k: v for k, v in asdict(trainee).items() if not isinstance(v, np.ndarray)}
+    report = {"trajectory": str(path), "scene": scene or {}, **parts, "metrics": summary,
+              "expert": {k: v for k, v in asdict(expert).items() if not isinstance(v, np.ndarray)}, "formula": FORMULA}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = Path(path).stem
+        (out / f"{stem}_score.json").write_text(json.dumps(report, indent=2))
+        (out / f"{stem}_score.md").write_text(_markdown(report))
+        _plot(trainee, expert, out / f"{stem}_score.png", f"{stem}: score {parts['score']:.0f}/100")
+    return report
+
+
+def _markdown(report: dict[str, Any]) -> str:
+    m, e = report["metrics"], report["expert"]
+    ttt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
+    rows = [("final shape error", f"{m['final_error_mm']:.3f} mm", f"{e['final_error_mm']:.3f} mm"),
+            ("time to target", ttt(m["time_to_target_s"]), ttt(e["time_to_target_s"])),
+            ("peak force", f"{m['peak_force_N']:.1f} N", f"{e['peak_force_N']:.1f} N"),
+            ("mean force", f"{m['mean_force_N']:.1f} N", f"{e['mean_force_N']:.1f} N"),
+            ("force-time integral", f"{m['force_time_integral_Ns']:.1f} N s", f"{e['force_time_integral_Ns']:.1f} N s"),
+            ("jerk (RMS)", f"{m['jerk_rms']:.3g} N/s^3", f"{e['jerk_rms']:.3g} N/s^3")]
+    lines = [f"# Trainee score: {report['score']:.1f} / 100\n", f"Trajectory `{report['trajectory']}`.\n",
+             "| metric | trainee | expert |", "|---|---|---|", *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
+             "| part | value |", "|---|---|", *[f"| {k} | {report[k]:.3f} |" for k in WEIGHTS], "",
+             f"Formula: {report['formula']}."]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 4.5), sharex=True)
+    ax1.plot(trainee.time_s, trainee.error_mm, label="trainee")
+    ax1.plot(expert.time_s, expert.error_mm, "--", label="expert")
+    ax1.set_ylabel("shape error (mm)")
+    ax1.legend(fontsize=7)
+    ax2.plot(trainee.time_s, trainee.force_N, label="trainee")
+    ax2.plot(expert.time_s, expert.force_N, "--", label="expert")
+    ax2.set_ylabel("force (N)")
+    ax2.set_xlabel("time (s)")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
