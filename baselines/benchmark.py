@@ -226,7 +226,10 @@ def _learning_curves(plan: Plan, path: Path, runs_dir: Path, command: str, plt: 
         ax.set_xlabel("env steps")
         ax.set_ylabel("test-target episode return")
         ax.set_title(scene, fontsize=8)
-        ax.legend(fontsize=6)
+        if ax.get_lines():
+            ax.legend(fontsize=6)
+        else:
+            ax.text(0.5, 0.5, "no agents in this run", ha="center", transform=ax.transAxes)
     fig.suptitle(f"learning curves (mean, 95 % band over seeds) -- {command}", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

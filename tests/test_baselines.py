@@ -1,0 +1,124 @@
+"""Baseline policies, the evaluation protocol's statistics, agents' files and the compare report."""
+
+import json
+
+import numpy as np
+import pytest
+
+from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
+from baselines.benchmark import Plan, run
+from baselines.evaluate import bootstrap_ci, evaluate, iqm, scene_kwargs
+from baselines.policies import BASELINES, InversionPolicy, make_baseline
+from softenv.envs.config import make_config
+from softenv.envs.world import World
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    kwargs = scene_kwargs("SoftSphere-v0")[1]
+    kwargs.pop("obs_mode")
+    return World(make_config(**kwargs))
+
+
+def test_oracle_reaches_every_test_target_at_once_and_zero_scores_nothing(world):
+    oracle = evaluate(make_baseline("oracle", world), "SoftSphere-v0", episodes=20)
+    zero = evaluate(make_baseline("zero", world), "SoftSphere-v0", episodes=20)
+    assert oracle.values["success"].all() and (oracle.values["steps_to_success"] == 1).all()
+    assert oracle.values["final_error_mm"].max() < 1e-3
+    np.testing.assert_allclose(oracle.values["normalized_score"], 100.0, atol=1e-6)
+    np.testing.assert_allclose(zero.values["normalized_score"], 0.0, atol=1e-9)
+    assert not zero.values["success"].any()
+
+
+def test_better_regressors_make_better_policies(world):
+    scores = {name: evaluate(make_baseline(name, world), "SoftSphere-v0", episodes=20).values["final_error_mm"].mean()
+              for name in ("zero", "invert-poly1", "invert-poly3")}
+    assert scores["invert-poly3"] < scores["invert-poly1"] < scores["zero"]
+
+
+def test_inversion_recovers_the_least_squares_force_of_a_linear_model(world):
+    """An analytic forward model b = M f + c: the inversion must find the least-squares solution."""
+    rng = np.random.default_rng(0)
+    M = rng.normal(size=(world.k, 4)) / world.device.half
+    c = rng.normal(size=world.k)
+    policy = InversionPolicy(world, lambda f: f @ M.T + c, "linear")
+    true_action = np.array([0.3, -0.4, 0.2, 0.6])
+    target = world.device.features(true_action) @ M.T + c
+    obs = np.zeros(2 * world.k + 8)
+    obs[world.k:2 * world.k] = target * world.inv_sqrt
+    obs[-4:] = world.device.rest_action
+    np.testing.assert_allclose(policy.predict(obs), true_action, atol=1e-4)
+
+
+def test_iqm_and_bootstrap_interval_against_direct_computation():
+    values = np.arange(100, dtype=float)
+    assert iqm(values) == pytest.approx(np.mean(np.arange(25, 75)))
+    mean, lo, hi = bootstrap_ci(values)
+    se = values.std() / 10
+    assert mean == pytest.approx(49.5) and lo < mean < hi
+    assert hi - lo == pytest.approx(2 * 1.96 * se, rel=0.15)       # normal approximation of the interval
+
+
+def test_unknown_names_list_the_valid_ones(world):
+    with pytest.raises(ValueError, match="valid baselines"):
+        make_baseline("invert-gpt", world)
+    with pytest.raises(ValueError, match="valid scenes"):
+        scene_kwargs("SoftCube-v0")
+    with pytest.raises(ValueError, match="valid agents"):
+        hyperparams("dqn", "SoftSphere-v0")
+    with pytest.raises(ValueError, match="valid baselines"):
+        run(Plan(["SoftSphere-v0"], ["nope"], [], {"SoftSphere-v0": 1}), None, None, "", write=False)
+
+
+def test_yaml_strings_are_parsed_as_literals_only():
+    assert _literal_dict("dict(net_arch=[64, 64], log_std_init=-1.0)") == {"net_arch": [64, 64], "log_std_init": -1.0}
+    with pytest.raises(ValueError):
+        _literal_dict("dict(a=__import__('os').getcwd())")
+    assert hyperparams("sac-her", "SoftSphere-v0")["replay_buffer_kwargs"]["goal_selection_strategy"] == "future"
+
+
+def test_agent_file_is_checked_against_the_scene(tmp_path):
+    path = train_agent("ppo", "SoftSphere-v0", 0, tmp_path / "ppo", timesteps=512, progress=False)
+    policy = load_agent(path, "SoftSphere-v0")
+    obs_size = policy.model.observation_space.shape[0]
+    assert policy.predict(np.zeros((3, obs_size), np.float32)).shape == (3, 4)
+    with pytest.raises(ValueError, match="trained for scene 'SoftSphere-v0'.*asked for scene 'SoftSphereViscoelastic-v0'"):
+        load_agent(path, "SoftSphereViscoelastic-v0")
+    meta = json.loads((tmp_path / "ppo" / "agent.json").read_text())
+    meta["format_version"] = 99
+    (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="format_version=99"):
+        load_agent(path, "SoftSphere-v0")
+
+
+def test_training_resumes_from_its_last_checkpoint(tmp_path):
+    out = tmp_path / "sac"
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
+    (out / "model.zip").unlink()
+    checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"))
+    assert checkpoints
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1600, progress=False)
+    log = (out / "logs" / "progress.csv").read_text().splitlines()
+    assert (out / "model.zip").exists() and len(log) > 1
+
+
+def test_compare_writes_the_report_with_its_command(tmp_path):
+    plan = Plan(["SoftSphere-v0"], ["zero", "oracle", "direct-poly3"], [], {"SoftSphere-v0": 1}, episodes=10)
+    summaries = run(plan, tmp_path, tmp_path / "runs", "softenv compare --test", echo=lambda s: None)
+    assert [s["policy"] for s in summaries] == ["zero", "oracle", "direct-poly3"]
+    md = (tmp_path / "benchmark.md").read_text()
+    assert "softenv compare --test" in md and "| SoftSphere-v0 | oracle |" in md
+    csv_text = (tmp_path / "benchmark.csv").read_text()
+    assert csv_text.startswith("# made by: softenv compare --test")
+    for name in ("policy_error_vs_runtime.png", "benchmark_learning_curves.png", "benchmark_gallery.png"):
+        assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_every_baseline_acts_within_the_box(world):
+    obs = np.random.default_rng(0).uniform(-1, 1, (3, 2 * world.k + 8)).astype(np.float32)
+    obs[:, -4:] = world.device.rest_action
+    for name in BASELINES:
+        if name.endswith("mlp"):
+            continue                                   # slow to train; the compare test runs direct-poly3 end to end
+        actions = make_baseline(name, world).predict(obs)
+        assert actions.shape == (3, 4) and np.all(np.abs(actions) <= 1.0)
