@@ -343,3 +343,15 @@ def test_sb3_adapter_reports_terminal_observations():
     assert dones.all()
     assert all(info["TimeLimit.truncated"] and info["terminal_observation"].shape == obs.shape[1:] for info in infos)
     assert all("normalized_score" in info for info in infos)
+
+
+def test_human_mode_draws_without_a_display_and_returns_none():
+    env = gym.make("SoftSphere-v0", render_mode="human")
+    env.reset(seed=0)
+    env.step(np.zeros(4, np.float32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert env.render() is None
+    assert env.unwrapped._renderer._figure is not None
+    env.close()
+    assert env.unwrapped._renderer is None
