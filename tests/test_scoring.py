@@ -75,3 +75,21 @@ def test_out_of_range_command_and_bad_files(tmp_path):
     np.savez(tmp_path / "t.npz", format_version=7, **{c: np.zeros(3) for c in COLUMNS})
     with pytest.raises(ValueError, match="format_version=7"):
         load_trajectory(tmp_path / "t.npz")
+
+
+def test_score_command_prints_the_score_and_rejects_bad_files(tmp_path, capsys):
+    from softenv.cli import main
+
+    assert main(["score", str(EXAMPLES / "expert.csv"), "--out", str(tmp_path)]) == 0
+    assert "score" in capsys.readouterr().out and (tmp_path / "expert_score.png").exists()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,insertion_deg\n0,90\n")
+    assert main(["score", str(bad)]) == 2
+    assert "missing columns" in capsys.readouterr().err
+
+
+def test_compare_command_rejects_unknown_names(capsys):
+    from softenv.cli import main
+
+    assert main(["compare", "--quick", "--policies", "telepathy", "--agents", "--out", "/nonexistent"]) == 2
+    assert "valid baselines" in capsys.readouterr().err
