@@ -23,7 +23,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 from softenv.envs.world import World
-from softenv.response import MLPResponse, ResponseModel, make_response
+from softenv.response import ResponseModel, make_response
 
 # default starts of the inversion, in action units: the centre of the box, and mid-depth presses
 _STARTS = np.array([[0.0, 0.0, 0.0, 0.0], [0.3, 0.0, 0.5, 0.5], [-0.3, 0.0, 0.5, -0.5]])
@@ -193,9 +193,8 @@ BASELINES = ("zero", "random", "oracle", *(f"invert-{m}" for m in POLICY_MODELS)
 
 
 def policy_model(name: str, seed: int) -> ResponseModel:
-    if name == "mlp":
-        return MLPResponse(trainer="lbfgs", restarts=3, seed=seed, clip=True)
-    return make_response(name, seed=seed, clip=True)
+    options = {"trainer": "lbfgs", "restarts": 3} if name == "mlp" else {}
+    return make_response(name, seed=seed, clip=True, **options)
 
 
 def training_data(world: World) -> tuple[np.ndarray, np.ndarray]:

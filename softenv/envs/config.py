@@ -97,7 +97,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
     },
     "response": {
         "model": Field("exact", "", "exact | " + " | ".join(REGRESSORS), _choice("exact", *REGRESSORS),
-                       "force -> b model that the scene steps with (exact: tabulated analytic tissue)"),
+                       "force -> b model that the scene steps with (exact: tabulated analytic tissue; "
+                       "regressors are trained on the scene's workspace data, MLPs by L-BFGS)"),
         "table_nodes": Field((25, 11, 9, 9), "", "4 counts, 2-257", _nodes,
                              "grid of the tabulated exact response (insertion, lateral, normal, sideways)"),
     },

@@ -111,9 +111,11 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
         b = shape_model.encode(data.shapes)
 
         def train() -> ResponseModel:
-            return make_response(name, seed=sm_cfg["seed"], clip=True).fit(data.forces, b, shape_model=shape_model)
+            # MLPs train by L-BFGS here: Levenberg-Marquardt's Jacobian on 1024 x k targets takes minutes
+            options = {"trainer": "lbfgs"} if name.startswith("mlp") else {}
+            return make_response(name, seed=sm_cfg["seed"], clip=True, **options).fit(data.forces, b, shape_model=shape_model)
 
-        response = _cache.cached("regressor", {"scene": key, "model": name}, train,
+        response = _cache.cached("regressor", {"scene": key, "model": name, "trainer": "lbfgs"}, train,
                                  lambda p: ResponseModel.load(p, shape_model=shape_model), lambda m, p: m.save(p))
     scene = Scene(config, mesh, tissue, layout, workspace, data, shape_model, response)
     _SCENES[key] = scene

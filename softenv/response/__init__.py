@@ -4,6 +4,8 @@
 ``ResponseModel.load(path, shape_model=...)``. See :mod:`softenv.response.base`.
 """
 
+from typing import Any
+
 from .anfis import AnfisResponse
 from .base import MinMaxScaler, ResponseModel
 from .exact import ExactResponse, TabulatedResponse
@@ -28,20 +30,24 @@ REGRESSORS: dict[str, str] = {
 }
 
 
-def make_response(name: str, seed: int = 0, clip: bool = False) -> ResponseModel:
-    """A regressor by name (see ``REGRESSORS``)."""
+def make_response(name: str, seed: int = 0, clip: bool = False, **mlp_options: Any) -> ResponseModel:
+    """A regressor by name (see ``REGRESSORS``). ``mlp_options`` (e.g. ``trainer="lbfgs"``,
+    ``restarts=3``) override the MLP set-ups' arguments and are refused for the other models."""
+    if mlp_options and not name.startswith("mlp"):
+        raise ValueError(f"options {sorted(mlp_options)} apply to MLP regressors only, not {name!r}")
     factories = {
         "poly1": lambda: PolynomialResponse(1, clip=clip),
         "poly2": lambda: PolynomialResponse(2, ridge=1e-8, clip=clip),
         "poly3": lambda: PolynomialResponse(3, ridge=1e-8, clip=clip),
         "anfis": lambda: AnfisResponse(clip=clip),
         "anfis100": lambda: AnfisResponse(epochs=100, clip=clip),
-        "mlp": lambda: MLPResponse(seed=seed, clip=clip),
-        "mlp20": lambda: MLPResponse(hidden=(20, 20), restarts=3, seed=seed, clip=clip),
+        "mlp": lambda: MLPResponse(**{"seed": seed, "clip": clip, **mlp_options}),
+        "mlp20": lambda: MLPResponse(**{"hidden": (20, 20), "restarts": 3, "seed": seed, "clip": clip, **mlp_options}),
     }
     if name not in factories:
         raise ValueError(f"unknown regressor {name!r}; choose one of {list(factories)}")
     return factories[name]()
+
 
 __all__ = ["AnfisResponse", "ExactResponse", "MLPResponse", "MODELS", "MinMaxScaler", "PolynomialResponse",
            "REGRESSORS", "ResponseModel", "TabulatedResponse", "load_response", "make_response"]
