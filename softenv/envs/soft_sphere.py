@@ -91,7 +91,9 @@ class SoftSphereEnv(gym.Env):
     ``info`` at every step: the reward terms, ``shape_error_mm`` (RMS over vertices),
     ``force_N``, ``peak_force_N`` (episode so far), ``is_success`` and ``normalized_score``: the
     episode's score so far, 0 for the zero-force policy and 100 for the exact oracle (which holds the
-    target force), from the shape term alone; read it at the episode's last step.
+    target force), from the shape term alone; read it at the episode's last step. With creep
+    (viscoelastic scenes) holding the target force is not optimal -- the shape lags it -- so a policy
+    that presses harder at first can score above 100.
 
     ## Arguments
 
