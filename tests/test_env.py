@@ -357,13 +357,10 @@ def test_human_mode_draws_without_a_display_and_returns_none():
     assert env.unwrapped._renderer is None
 
 
-def test_mlp_scene_trains_its_regressor_in_seconds():
-    import time
-
-    t0 = time.perf_counter()
+def test_mlp_scene_builds_and_steps():
     env = gym.make("SoftSphere-v0", response={"model": "mlp"}, mesh={"resolution": 11},
                    shape_model={"n_contacts": 16, "n_loads": 8, "n_components": 6})
-    assert time.perf_counter() - t0 < 120
+    assert env.unwrapped.world.scene.response.trainer == "lbfgs"
     env.reset(seed=0)
     obs, reward, *_ = env.step(np.array([0.3, 0.1, 0.5, 0.2], np.float32))
     assert np.isfinite(obs).all() and env.observation_space.contains(obs)
