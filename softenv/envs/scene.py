@@ -60,11 +60,6 @@ class Scene:
         mid = (np.asarray(self.workspace.low) + np.asarray(self.workspace.high)) / 2
         return np.array([mid[0], mid[1], 0.0, 0.0])
 
-    @cached_property
-    def b_rest(self) -> np.ndarray:
-        """The response at zero force: the undeformed tongue in b-space."""
-        return self.response.predict(self.rest_features)
-
     def exact_response(self) -> ExactResponse:
         """The direct (untabulated) exact response of this scene: for checks and reports."""
         return ExactResponse(AnalyticTissue(self.mesh, self.tissue), self.layout, self.shape_model)

@@ -19,7 +19,6 @@ import numpy as np
 from gymnasium import spaces
 
 from ..response import TabulatedResponse
-from .config import make_config
 from .parts import Dynamics, IdealDevice, TargetFamily, target_schedule
 from .scene import Scene, build_scene
 
@@ -73,10 +72,6 @@ class World:
         self._table = scene.response if isinstance(scene.response, TabulatedResponse) else None
         self.action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
         self.observation_space = self._observation_space()
-
-    @classmethod
-    def from_overrides(cls, obs_mode: str = "vector", **overrides: Any) -> "World":
-        return cls(make_config(**overrides), obs_mode)
 
     # -- response -------------------------------------------------------------------------------
 
