@@ -28,26 +28,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from softenv.datasets import paper_dataset  # noqa: E402
+from softenv.geometry import interpolate_latlong  # noqa: E402
 from softenv.render import View, draw_surface  # noqa: E402
 from softenv.scree import cattell_scree  # noqa: E402
 from softenv.shape_model import ShapeModel  # noqa: E402
 
 EXAGGERATE = 3.0  # figures scale displacements for visibility (stated in their titles)
 RULES = ["scree", "kneedle", "noise", "variance_0.99", "variance_0.999"]
-
-
-def interp_latlong(field: np.ndarray, n: int, targets: np.ndarray) -> np.ndarray:
-    """Bilinear (latitude x periodic longitude) interpolation of a vector field on an n x n lat-long grid."""
-    f = field.reshape(n, n, 3)
-    lat = np.arcsin(np.clip(targets[:, 2] / np.linalg.norm(targets, axis=1), -1, 1))
-    lon = np.mod(np.arctan2(targets[:, 1], targets[:, 0]), 2 * np.pi)
-    r = np.clip((lat + np.pi / 2) / (np.pi / n) - 0.5, 0, n - 1)
-    q = lon / (2 * np.pi / n)
-    r0 = np.minimum(np.floor(r).astype(int), n - 2)
-    fr, fq = (r - r0)[:, None], (q - np.floor(q))[:, None]
-    q0 = np.floor(q).astype(int) % n
-    q1 = (q0 + 1) % n
-    return (1 - fr) * ((1 - fq) * f[r0, q0] + fq * f[r0, q1]) + fr * ((1 - fq) * f[r0 + 1, q0] + fq * f[r0 + 1, q1])
 
 
 def rule_table(law: str) -> tuple[list[str], dict]:
@@ -89,7 +76,7 @@ def main() -> None:
     for D in (4, 10):
         a, b = paper_dataset(441, n_deformations=D), paper_dataset(961, n_deformations=D)
         ma, mb = ShapeModel("scree").fit(a.shapes, a.mesh), ShapeModel("scree").fit(b.shapes, b.mesh)
-        cors = [abs(np.corrcoef(ma.components_[i], interp_latlong(mb.components_[i], 31, a.mesh.vertices).ravel())[0, 1])
+        cors = [abs(np.corrcoef(ma.components_[i], interpolate_latlong(mb.components_[i], 31, a.mesh.vertices).ravel())[0, 1])
                 for i in range(D)]
         ratio = ma.explained_variance_ / mb.explained_variance_
         md.append(f"| {D} | {', '.join(f'{c:.4f}' for c in cors)} | {ratio.min():.3f}-{ratio.max():.3f} |")

@@ -137,6 +137,24 @@ def icosphere_mesh(subdivisions: int, radius: float = 0.03) -> SphereMesh:
     return _frozen_mesh("icosphere", subdivisions, radius, vertices, np.array(faces, dtype=np.int32))
 
 
+def interpolate_latlong(field: np.ndarray, n: int, points: np.ndarray) -> np.ndarray:
+    """A vector field on an ``n x n`` lat-long grid (``latlong_mesh(n)`` order, ``(n * n * 3,)`` or
+    ``(n * n, 3)``) at the directions of ``points`` ``(m, 3)``: bilinear in latitude and periodic
+    longitude. For comparing fields (such as PCA components) between resolutions."""
+    f = np.asarray(field, dtype=np.float64).reshape(n, n, 3)
+    lat = np.arcsin(np.clip(points[:, 2] / np.linalg.norm(points, axis=1), -1, 1))
+    lon = np.mod(np.arctan2(points[:, 1], points[:, 0]), 2 * np.pi)
+    r = np.clip((lat + np.pi / 2) / (np.pi / n) - 0.5, 0, n - 1)
+    q = lon / (2 * np.pi / n)
+    r0 = np.minimum(np.floor(r).astype(int), n - 2)
+    fr, fq = (r - r0)[:, None], (q - np.floor(q))[:, None]
+    q0 = np.floor(q).astype(int) % n
+    q1 = (q0 + 1) % n
+    lower = (1 - fq) * f[r0, q0] + fq * f[r0, q1]
+    upper = (1 - fq) * f[r0 + 1, q0] + fq * f[r0 + 1, q1]
+    return (1 - fr) * lower + fr * upper
+
+
 def make_mesh(kind: str = "latlong", resolution: int = 31, radius: float = 0.03) -> SphereMesh:
     """Build a mesh by name (``"latlong"`` or ``"icosphere"``)."""
     check_choice(kind, "kind", MESH_KINDS)

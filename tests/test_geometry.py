@@ -70,3 +70,21 @@ def test_mesh_spec_round_trip_and_mismatch():
 def test_bad_mesh_arguments_name_the_argument(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_latlong_interpolation_is_exact_for_constants_and_second_order_for_smooth_fields():
+    from softenv.geometry import interpolate_latlong, latlong_mesh
+
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(500, 3))
+    points = points[np.abs(points[:, 2]) / np.linalg.norm(points, axis=1) < 0.9]   # away from the polar caps
+    unit = points / np.linalg.norm(points, axis=1, keepdims=True)
+    np.testing.assert_allclose(interpolate_latlong(np.tile([1.0, -2.0, 3.0], 31 * 31), 31, points),
+                               np.tile([1.0, -2.0, 3.0], (len(points), 1)), rtol=1e-12)
+    errors = []
+    for n in (31, 61):
+        field = latlong_mesh(n, radius=1.0).vertices        # the direction field itself
+        errors.append(np.abs(interpolate_latlong(field, n, points) - unit).max())
+    # linear interpolation of a unit-curvature field: error <= h^2 / 8 summed over both directions
+    assert errors[0] <= ((np.pi / 31) ** 2 + (2 * np.pi / 31) ** 2) / 8
+    assert errors[1] < errors[0] / 3                              # halving the spacing cuts the error ~4x

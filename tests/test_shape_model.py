@@ -2,26 +2,9 @@ import numpy as np
 import pytest
 
 from softenv.datasets import paper_dataset
-from softenv.geometry import latlong_mesh
+from softenv.geometry import interpolate_latlong, latlong_mesh
 from softenv.scree import cattell_scree, kneedle, noise_floor, variance_fraction
 from softenv.shape_model import ShapeModel
-
-
-def interp_latlong(field: np.ndarray, n: int, targets: np.ndarray) -> np.ndarray:
-    """Bilinear interpolation (latitude x periodic longitude) of a vector field on an n x n lat-long grid."""
-    f = field.reshape(n, n, 3)
-    lat = np.arcsin(np.clip(targets[:, 2] / np.linalg.norm(targets, axis=1), -1, 1))
-    lon = np.mod(np.arctan2(targets[:, 1], targets[:, 0]), 2 * np.pi)
-    r = np.clip((lat + np.pi / 2) / (np.pi / n) - 0.5, 0, n - 1)
-    q = lon / (2 * np.pi / n)
-    r0 = np.minimum(np.floor(r).astype(int), n - 2)
-    fr = (r - r0)[:, None]
-    q0 = np.floor(q).astype(int) % n
-    fq = (q - np.floor(q))[:, None]
-    q1 = (q0 + 1) % n
-    lower = (1 - fq) * f[r0, q0] + fq * f[r0, q1]
-    upper = (1 - fq) * f[r0 + 1, q0] + fq * f[r0 + 1, q1]
-    return (1 - fr) * lower + fr * upper
 
 
 @pytest.mark.parametrize("n_points", [441, 961])
@@ -41,7 +24,7 @@ def test_components_move_the_surface_the_same_way_at_441_and_961_points(n_def):
     ma = ShapeModel("scree").fit(a.shapes, a.mesh)
     mb = ShapeModel("scree").fit(b.shapes, b.mesh)
     for i in range(n_def):
-        field_b_on_a = interp_latlong(mb.components_[i], 31, a.mesh.vertices).ravel()
+        field_b_on_a = interpolate_latlong(mb.components_[i], 31, a.mesh.vertices).ravel()
         assert abs(np.corrcoef(ma.components_[i], field_b_on_a)[0, 1]) >= 0.99
     # eigenvalues are sums over points: they scale with the point count
     np.testing.assert_allclose(ma.explained_variance_ / mb.explained_variance_, 441 / 961, rtol=0.01)
