@@ -126,30 +126,25 @@ def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") ->
                              f"[{lo:g}, {hi:g}]")
 
 
-def to_actions(table: np.ndarray, config: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-order-hold resampling at ``dt``: step times and actions in ``[-1, 1]^4``."""
-    dt = config["dynamics"]["dt"]
-    n = max(1, int(math.floor(table[-1, 0] / dt + 1e-9)))
-    times = (np.arange(n) + 1) * dt
-    rows = np.searchsorted(table[:, 0], times - dt, side="right") - 1
-    rows = np.clip(rows, 0, len(table) - 1)
-    dev = config["device"]
-    lo = np.array([dev["insertion_deg"][0], -dev["lateral_deg"], 0.0, -dev["max_sideways_force"]])
-    hi = np.array([dev["insertion_deg"][1], dev["lateral_deg"], dev["max_normal_force"], dev["max_sideways_force"]])
-    actions = np.clip(2.0 * (table[rows, 1:] - lo) / (hi - lo) - 1.0, -1.0, 1.0)    # rounding only: ranges checked
-    return times, actions.astype(np.float32)
-
-
 def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
-    """Replay a validated trajectory through a reach scene whose target is the family centre."""
+    """Replay a validated trajectory through a reach scene whose target is the family centre.
+
+    Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``.
+    """
+    from .envs.scene import degrees_to_features
     from .envs.soft_sphere import SoftSphereEnv
 
     config = make_config(**(scene or {}))
     check_ranges(table, config)
-    times, actions = to_actions(table, config)
+    dt = config["dynamics"]["dt"]
+    times = (np.arange(max(1, int(math.floor(table[-1, 0] / dt + 1e-9)))) + 1) * dt
+    rows = np.clip(np.searchsorted(table[:, 0], times - dt, side="right") - 1, 0, len(table) - 1)
     overrides = {**(scene or {}), "task": {**(scene or {}).get("task", {}), "kind": "reach", "horizon": len(times)}}
     env = SoftSphereEnv(**overrides)
     world = env.world
+    features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
+    # ranges are checked above, so the clip only removes rounding at the box's faces
+    actions = np.clip(world.device.normalised(features), -1.0, 1.0).astype(np.float32)
     centre = world.device.normalised((world.family.low + world.family.high) / 2)
     env.reset(seed=0, options={"target": centre})
     error, force = np.empty(len(times)), np.empty(len(times))
@@ -158,9 +153,8 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
         error[i], force[i] = info["shape_error_mm"], info["force_N"]
     ref = math.sqrt(max(float(np.sum((env._target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
     reached = np.flatnonzero(error < world.tolerance * ref)
-    dt = config["dynamics"]["dt"]
-    features = world.device.features(actions.astype(np.float64))[:, 2:]
-    jerk = np.diff(features, n=3, axis=0) / dt ** 3 if len(features) > 3 else np.zeros((1, 2))
+    applied = world.device.features(actions.astype(np.float64))[:, 2:]
+    jerk = np.diff(applied, n=3, axis=0) / dt ** 3 if len(applied) > 3 else np.zeros((1, 2))
     return Replay(times, error, force, float(error[-1]), ref, float(times[reached[0]]) if reached.size else None,
                   float(force.max()), float(force.mean()), float(force.sum() * dt),
                   float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))

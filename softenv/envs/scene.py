@@ -9,7 +9,6 @@ imported only when an MLP response has to be trained.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -71,13 +70,21 @@ class Scene:
         return {"median_mm": float(np.median(err)), "p99_mm": float(np.percentile(err, 99)), "max_mm": float(err.max())}
 
 
+def degrees_to_features(commands: Any, radius: float) -> np.ndarray:
+    """Device commands ``(..., 4)`` in the config's units -- insertion and lateral position in degrees
+    of arc, normal and sideways force in N -- as force features (m, m, N, N)."""
+    out = np.array(commands, dtype=np.float64)
+    out[..., :2] = radius * np.deg2rad(out[..., :2])
+    return out
+
+
 def device_workspace(config: dict) -> Workspace:
     """The device's box in force-feature units, from the config's degrees and newtons."""
-    R = config["tissue"]["radius"]
-    dev = config["device"]
-    lo_i, hi_i = (R * math.radians(v) for v in dev["insertion_deg"])
-    lat = R * math.radians(dev["lateral_deg"])
-    return Workspace((lo_i, -lat, 0.0, -dev["max_sideways_force"]), (hi_i, lat, dev["max_normal_force"], dev["max_sideways_force"]))
+    dev, R = config["device"], config["tissue"]["radius"]
+    low = degrees_to_features([dev["insertion_deg"][0], -dev["lateral_deg"], 0.0, -dev["max_sideways_force"]], R)
+    high = degrees_to_features([dev["insertion_deg"][1], dev["lateral_deg"], dev["max_normal_force"],
+                                dev["max_sideways_force"]], R)
+    return Workspace(tuple(low.tolist()), tuple(high.tolist()))
 
 
 def build_scene(config: dict, progress: bool = False) -> Scene:

@@ -11,7 +11,6 @@ perform the same IEEE operations in the same order.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,7 +19,7 @@ from gymnasium import spaces
 
 from ..response import TabulatedResponse
 from .parts import Dynamics, IdealDevice, TargetFamily, target_schedule
-from .scene import Scene, build_scene
+from .scene import Scene, build_scene, degrees_to_features
 
 OBS_MODES = ("vector", "dict", "vertices")
 # the shape-error floor: a target displacement below this share of the family centre's counts as it
@@ -50,11 +49,10 @@ class World:
         scene = self.scene
         self.device = IdealDevice(scene.workspace)
         self.dynamics = Dynamics(**config["dynamics"])
-        task, R = config["task"], config["tissue"]["radius"]
-        low = np.array([R * math.radians(task["target_insertion_deg"][0]), R * math.radians(task["target_lateral_deg"][0]),
-                        task["target_normal_force"][0], task["target_sideways_force"][0]])
-        high = np.array([R * math.radians(task["target_insertion_deg"][1]), R * math.radians(task["target_lateral_deg"][1]),
-                         task["target_normal_force"][1], task["target_sideways_force"][1]])
+        task = config["task"]
+        ranges = [task[key] for key in ("target_insertion_deg", "target_lateral_deg", "target_normal_force",
+                                        "target_sideways_force")]
+        low, high = (degrees_to_features([r[i] for r in ranges], config["tissue"]["radius"]) for i in (0, 1))
         self.family = TargetFamily(low, high, task["split"])
         self.task_kind = task["kind"]
         self.horizon = task["horizon"]
