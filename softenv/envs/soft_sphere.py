@@ -300,7 +300,7 @@ class SoftSphereVectorEnv(VectorEnv):
         ti = np.minimum(self._t, T - 1)
         f = w.device.features(a)
         g = w.response(f)
-        z = self._z.copy()
+        z = self._z.copy() if w.dynamics.stateful else self._z      # the creep state is committed per row below
         b = w.dynamics.step(z, g)
         target = ep.target_b[rows, ti]
         d = b - target
