@@ -137,11 +137,15 @@ def provenance(command: str) -> dict[str, Any]:
     import torch
 
     import softenv
+    from softenv.bench.timing import machine_info
 
+    machine = machine_info()  # the BLAS kernels are named because they change the bits of every product
     return {"command": command, "softenv": softenv.__version__, "numpy": np.__version__,
             "gymnasium": gymnasium.__version__, "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__, "python": platform.python_version(), "machine": platform.processor() or
-            platform.machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+            "torch": torch.__version__, "python": platform.python_version(),
+            "machine": f"{machine['cpu']} ({platform.machine()}, {machine['logical_cores']} cores, OpenBLAS "
+                       f"{machine['openblas_kernels']} kernels)",
+            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
 
 
 def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir: Path, command: str,

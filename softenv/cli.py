@@ -99,7 +99,7 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
-    bench.run(args.quick, Path(args.out), args.only, command="softenv " + " ".join(argv))
+    bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv))
 
 
 def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
@@ -124,7 +124,7 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
     if args.quick:
         print(f"softenv compare --quick: SoftSphere-v0 test targets, {plan.episodes} episodes per policy; agents "
               f"trained now for {plan.timesteps} env steps (1 seed) -- short budgets, not the full benchmark")
-    benchmark.run(plan, Path(args.out), Path(args.runs), "softenv " + " ".join(argv),
+    benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv),
                   stem="benchmark_quick" if args.quick else "benchmark")
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
 import platform
 import time
@@ -83,22 +84,75 @@ def spread_us(t: Timing) -> str:
     return f"IQR {t.p25 * 1e6:.2f}-{t.p75 * 1e6:.2f} us"
 
 
-def machine_info() -> dict[str, Any]:
-    """What the numbers were measured on."""
-    cpu = platform.processor() or "unknown"
+def _cpuinfo() -> dict[str, str]:
+    """The first processor's fields from /proc/cpuinfo (empty where there is none)."""
+    fields: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
+                if not line.strip():
                     break
+                key, _, value = line.partition(":")
+                fields[key.strip()] = value.strip()
     except OSError:
         pass
+    return fields
+
+
+def openblas_kernels() -> str:
+    """The kernel set numpy's OpenBLAS picked when it loaded ("Haswell", "SkylakeX", ...), or "unknown"."""
+    try:
+        with open("/proc/self/maps") as fh:
+            paths = sorted({line.split()[-1] for line in fh if "openblas" in line.lower() and ".so" in line})
+    except OSError:
+        return "unknown"
+    for path in sorted(paths, key=lambda p: "numpy" not in p):  # numpy's own copy first
+        lib = ctypes.CDLL(path)  # already loaded: this only returns its handle
+        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename64_",
+                       "openblas_get_corename"):
+            getter = getattr(lib, symbol, None)
+            if getter is not None:
+                getter.restype = ctypes.c_char_p
+                return getter().decode()
+    return "unknown"
+
+
+AVX512_FLAGS = ("avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl")
+AVX2_KERNELS = ("Haswell", "Zen")
+
+
+def blas_advice() -> str | None:
+    """A warning when OpenBLAS runs its AVX2 kernels on a CPU with AVX-512, else None.
+
+    Batched decoding is a GEMM with an inner dimension of only k + 1, so it is bound by the FMA rate,
+    not by memory: on a Zen 5 core the AVX2 (Haswell) kernels take about 2.5x the time to write the
+    output, the AVX-512 (SkylakeX) kernels about 1.6x. Some machines pin ``OPENBLAS_CORETYPE=Haswell``
+    so that BLAS results are bitwise the same on every host; OpenBLAS 0.3.31 also falls back to Haswell
+    on CPUs it does not recognise (OpenMathLib/OpenBLAS#6029).
+    """
+    kernels = openblas_kernels()
+    flags = set(_cpuinfo().get("flags", "").split())
+    if kernels not in AVX2_KERNELS or not flags.issuperset(AVX512_FLAGS):
+        return None
+    pinned = os.environ.get("OPENBLAS_CORETYPE")
+    cause = f"OPENBLAS_CORETYPE={pinned} pins" if pinned else "OpenBLAS picked"
+    fix = ("unset it (env -u OPENBLAS_CORETYPE) to let OpenBLAS choose, unless bitwise-identical BLAS results "
+           "across hosts matter more" if pinned else "set OPENBLAS_CORETYPE=SkylakeX")
+    return (f"{cause} its {kernels} (AVX2) kernels on this AVX-512 CPU, so batched decoding runs at about "
+            f"half speed; {fix}")
+
+
+def machine_info() -> dict[str, Any]:
+    """What the numbers were measured on."""
+    cpu = _cpuinfo()
     import gymnasium
 
-    return {"cpu": cpu, "logical_cores": os.cpu_count(), "python": platform.python_version(),
-            "numpy": np.__version__, "gymnasium": gymnasium.__version__, "platform": platform.platform(),
-            "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
+    info = {"cpu": cpu.get("model name", platform.processor() or "unknown"),
+            "cpu_family": cpu.get("cpu family", "unknown"), "logical_cores": os.cpu_count(),
+            "python": platform.python_version(), "numpy": np.__version__, "gymnasium": gymnasium.__version__,
+            "platform": platform.platform(), "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
+            "openblas_kernels": openblas_kernels(), "OPENBLAS_CORETYPE": os.environ.get("OPENBLAS_CORETYPE", "unset")}
+    return info
 
 
 def gym_step_timing(env: Any, actions: list, steps: int, repeats: int = 5, seed: int = 0) -> Timing:

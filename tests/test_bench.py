@@ -1,0 +1,63 @@
+"""``softenv bench``: the machine facts it records (which OpenBLAS kernels ran), its advice, its reports."""
+
+import json
+import os
+import platform
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from softenv import bench
+from softenv.bench import timing
+
+OPENBLAS = "openblas" in np.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"].lower()
+
+
+@pytest.mark.skipif(not OPENBLAS or platform.machine() != "x86_64", reason="reads x86-64 OpenBLAS kernel names")
+@pytest.mark.parametrize("coretype", ["Sandybridge", "Haswell"])
+def test_openblas_kernels_names_the_kernels_openblas_loaded(coretype):
+    # a fresh interpreter, so that OpenBLAS reads OPENBLAS_CORETYPE when numpy loads it
+    env = {**os.environ, "OPENBLAS_CORETYPE": coretype}
+    code = "from softenv.bench.timing import openblas_kernels; print(openblas_kernels())"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == coretype
+
+
+def test_blas_advice_only_for_avx2_kernels_on_an_avx512_cpu(monkeypatch):
+    avx512 = {"flags": "fpu sse avx avx2 fma " + " ".join(timing.AVX512_FLAGS)}
+    monkeypatch.setattr(timing, "_cpuinfo", lambda: avx512)
+    monkeypatch.delenv("OPENBLAS_CORETYPE", raising=False)
+    monkeypatch.setattr(timing, "openblas_kernels", lambda: "SkylakeX")
+    assert timing.blas_advice() is None
+    monkeypatch.setattr(timing, "openblas_kernels", lambda: "Haswell")
+    assert "set OPENBLAS_CORETYPE=SkylakeX" in timing.blas_advice()
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")  # a pin: name it and how to lift it
+    advice = timing.blas_advice()
+    assert "OPENBLAS_CORETYPE=Haswell pins" in advice and "env -u OPENBLAS_CORETYPE" in advice
+    monkeypatch.setattr(timing, "_cpuinfo", lambda: {"flags": "fpu sse avx avx2 fma"})  # AVX2 is all there is
+    assert timing.blas_advice() is None
+
+
+def test_command_line_states_the_openblas_kernel_setting(monkeypatch):
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
+    assert bench.command_line(["bench", "--quick"]) == "OPENBLAS_CORETYPE=Haswell softenv bench --quick"
+    monkeypatch.delenv("OPENBLAS_CORETYPE")
+    assert bench.command_line(["bench"]) == "env -u OPENBLAS_CORETYPE softenv bench"
+
+
+def test_bench_run_writes_reports_with_machine_facts(tmp_path):
+    lines = []
+    rows = bench.run(True, tmp_path, ["fit"], command="softenv bench --quick --only fit", echo=lines.append)
+    assert rows[0].section == "reference" and rows[0].value > 0
+    fit = [r for r in rows if r.section == "shape model"]
+    assert fit and all(r.value > 0 for r in fit)
+    payload = json.loads((tmp_path / "perf_quick.json").read_text())
+    assert payload["machine"]["openblas_kernels"] == timing.openblas_kernels()
+    assert payload["machine"]["OPENBLAS_CORETYPE"] == os.environ.get("OPENBLAS_CORETYPE", "unset")
+    assert payload["blas_advice"] == timing.blas_advice()
+    md = (tmp_path / "perf_quick.md").read_text()
+    assert "softenv bench --quick --only fit" in md and "| shape model | fit, paper data" in md
+    with pytest.raises(ValueError, match="unknown bench section"):
+        bench.run(True, tmp_path, ["nope"])
