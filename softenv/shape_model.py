@@ -39,6 +39,11 @@ THREE_SIGMA = 0.9973002039367398  # P(|z| <= 3) of a standard normal
 _DECODE_BLOCK_BYTES = 256 * 1024
 
 
+def decode_block_rows(n_features: int, itemsize: int) -> int:
+    """Shapes per product when batched decoding writes ``n_features`` values of ``itemsize`` bytes each."""
+    return max(4, _DECODE_BLOCK_BYTES // (n_features * itemsize))
+
+
 class ShapeModel:
     """Principal-component model of surface shapes.
 
@@ -227,7 +232,7 @@ class ShapeModel:
             lifted = np.empty((b.shape[0], k + 1), dtype=b.dtype)
             lifted[:, 0] = 1.0
             lifted[:, 1:] = b
-            rows = max(4, _DECODE_BLOCK_BYTES // (out.shape[1] * out.itemsize))
+            rows = decode_block_rows(out.shape[1], out.itemsize)
             for start in range(0, b.shape[0], rows):
                 stop = start + rows
                 np.dot(lifted[start:stop], aug, out=out[start:stop])
