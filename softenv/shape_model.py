@@ -34,9 +34,10 @@ SOLVERS = ("auto", "gram", "svd", "randomized")
 REGIONS = ("data", "box", "ellipsoid")
 THREE_SIGMA = 0.9973002039367398  # P(|z| <= 3) of a standard normal
 # Output bytes per product in batched decoding. With K = k + 1 this small, one huge GEMM runs 2x
-# slower than row blocks whose output (here 256 KiB) and packed components (k x p) stay in L2
-# together; measured on a 1 MiB-L2 Zen 5 core, 22 rows at 961 points (see results/perf.md).
-_DECODE_BLOCK_BYTES = 256 * 1024
+# slower than row blocks whose output (here 768 KiB, 68 shapes at 961 points) and packed components
+# (k x p) stay in a 1 MiB L2 together. Measured on Zen 5 (results/perf.md): within 2 % of the best
+# block for OpenBLAS's AVX2 kernels and 8 % for its AVX-512 ones, which like 16-24 rows best.
+_DECODE_BLOCK_BYTES = 768 * 1024
 
 
 def decode_block_rows(n_features: int, itemsize: int) -> int:
