@@ -93,8 +93,8 @@ def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elap
 
 
 def command_line(argv: list[str]) -> str:
-    """``softenv ARGV`` as a reader must type it to reproduce this run: with this run's OpenBLAS kernel
-    setting, which changes batched-decode times by 1.5x on AVX-512 CPUs."""
+    """``softenv ARGV`` as a reader must type it to reproduce this run, with this run's OpenBLAS kernel
+    setting: it changes the last bits of every product and, on AVX-512 CPUs, batched-decode times."""
     coretype = os.environ.get("OPENBLAS_CORETYPE")
     prefix = f"OPENBLAS_CORETYPE={coretype} " if coretype else "env -u OPENBLAS_CORETYPE "
     return prefix + " ".join(["softenv", *argv])

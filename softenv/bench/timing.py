@@ -103,7 +103,7 @@ def openblas_kernels() -> str:
     """The kernel set numpy's OpenBLAS picked when it loaded ("Haswell", "SkylakeX", ...), or "unknown"."""
     try:
         with open("/proc/self/maps") as fh:
-            paths = sorted({line.split()[-1] for line in fh if "openblas" in line.lower() and ".so" in line})
+            paths = {line.split()[-1] for line in fh if "openblas" in line.lower() and ".so" in line}
     except OSError:
         return "unknown"
     for path in sorted(paths, key=lambda p: "numpy" not in p):  # numpy's own copy first
@@ -125,10 +125,11 @@ def blas_advice() -> str | None:
     """A warning when OpenBLAS runs its AVX2 kernels on a CPU with AVX-512, else None.
 
     Batched decoding is a GEMM with an inner dimension of only k + 1 (11 FMAs per output value), so it
-    is bound by the FMA rate, not by memory: on a Zen 5 core the AVX2 (Haswell) kernels take about 2.4x
-    the time to write the output, their arithmetic alone 1.9x; the AVX-512 (SkylakeX) kernels 1.6x. Some machines pin ``OPENBLAS_CORETYPE=Haswell``
-    so that BLAS results are bitwise the same on every host; OpenBLAS 0.3.31 also falls back to Haswell
-    on CPUs it does not recognise (OpenMathLib/OpenBLAS#6029).
+    is bound by the FMA rate, not by memory: on a Zen 5 core it takes 2.5x the time to write the output
+    with OpenBLAS's AVX2 (Haswell) kernels, whose arithmetic alone takes 1.9x, and 1.6x with its
+    AVX-512 (SkylakeX) kernels. Some machines pin ``OPENBLAS_CORETYPE=Haswell`` so that BLAS results
+    are bitwise the same on every host; OpenBLAS 0.3.31 also falls back to Haswell on CPUs it does not
+    recognise (OpenMathLib/OpenBLAS#6029).
     """
     kernels = openblas_kernels()
     flags = set(_cpuinfo().get("flags", "").split())
@@ -139,7 +140,7 @@ def blas_advice() -> str | None:
     fix = ("unset it (env -u OPENBLAS_CORETYPE) to let OpenBLAS choose, unless bitwise-identical BLAS results "
            "across hosts matter more" if pinned else "set OPENBLAS_CORETYPE=SkylakeX")
     return (f"{cause} its {kernels} (AVX2) kernels on this AVX-512 CPU; batched decoding is bound by the FMA "
-            f"rate and takes up to 1.8x as long with them; {fix}")
+            f"rate and takes about 1.3x as long with them; {fix}")
 
 
 def machine_info() -> dict[str, Any]:
@@ -147,12 +148,11 @@ def machine_info() -> dict[str, Any]:
     cpu = _cpuinfo()
     import gymnasium
 
-    info = {"cpu": cpu.get("model name", platform.processor() or "unknown"),
+    return {"cpu": cpu.get("model name", platform.processor() or "unknown"),
             "cpu_family": cpu.get("cpu family", "unknown"), "logical_cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__, "gymnasium": gymnasium.__version__,
             "platform": platform.platform(), "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
             "openblas_kernels": openblas_kernels(), "OPENBLAS_CORETYPE": os.environ.get("OPENBLAS_CORETYPE", "unset")}
-    return info
 
 
 def gym_step_timing(env: Any, actions: list, steps: int, repeats: int = 5, seed: int = 0) -> Timing:
