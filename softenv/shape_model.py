@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ._artifact import load_artifact, require_arrays, save_artifact
+from ._blas import SMALL_GEMM_MAX_MNK, has_small_gemm
 from ._validation import check_array, check_choice, check_finite, check_int, check_real
 from .geometry import SphereMesh
 from .scree import select_n_components
@@ -33,15 +34,19 @@ MODEL_VERSION = 1
 SOLVERS = ("auto", "gram", "svd", "randomized")
 REGIONS = ("data", "box", "ellipsoid")
 THREE_SIGMA = 0.9973002039367398  # P(|z| <= 3) of a standard normal
-# Output bytes per product in batched decoding. With K = k + 1 this small, one huge GEMM runs 2x
-# slower than row blocks whose output (here 768 KiB, 68 shapes at 961 points) and packed components
-# (k x p) stay in a 1 MiB L2 together. Measured on Zen 5 (results/perf.md): within 2 % of the best
-# block for OpenBLAS's AVX2 kernels and 8 % for its AVX-512 ones, which like 16-24 rows best.
+# Batched decoding is one product per block of shapes, never one huge GEMM: with an inner dimension
+# of only k + 1, that runs 2x slower. On OpenBLAS's AVX-512 kernels a block stays within their
+# small-matrix path (no packing, the output written once); elsewhere its output (768 KiB, 68 shapes
+# at 961 points) and the packed components stay in a 1 MiB L2 together. Measured on Zen 5 against
+# other block sizes (results/perf.md, results/perf-haswell/perf.md).
 _DECODE_BLOCK_BYTES = 768 * 1024
 
 
-def decode_block_rows(n_features: int, itemsize: int) -> int:
-    """Shapes per product when batched decoding writes ``n_features`` values of ``itemsize`` bytes each."""
+def decode_block_rows(n_features: int, n_terms: int, itemsize: int) -> int:
+    """Shapes per product when batched decoding writes ``n_features`` values of ``itemsize`` bytes per
+    shape, each a sum of ``n_terms`` products (k components and the mean)."""
+    if has_small_gemm():
+        return max(1, SMALL_GEMM_MAX_MNK // (n_features * n_terms))
     return max(4, _DECODE_BLOCK_BYTES // (n_features * itemsize))
 
 
@@ -233,7 +238,7 @@ class ShapeModel:
             lifted = np.empty((b.shape[0], k + 1), dtype=b.dtype)
             lifted[:, 0] = 1.0
             lifted[:, 1:] = b
-            rows = decode_block_rows(out.shape[1], out.itemsize)
+            rows = decode_block_rows(out.shape[1], k + 1, out.itemsize)
             for start in range(0, b.shape[0], rows):
                 stop = start + rows
                 np.dot(lifted[start:stop], aug, out=out[start:stop])

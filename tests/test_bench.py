@@ -15,14 +15,20 @@ from softenv.bench import timing
 OPENBLAS = "openblas" in np.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"].lower()
 
 
+AVX512 = set(timing.AVX512_FLAGS) <= set(timing._cpuinfo().get("flags", "").split())
+
+
 @pytest.mark.skipif(not OPENBLAS or platform.machine() != "x86_64", reason="reads x86-64 OpenBLAS kernel names")
-@pytest.mark.parametrize("coretype", ["Sandybridge", "Haswell"])
-def test_openblas_kernels_names_the_kernels_openblas_loaded(coretype):
+@pytest.mark.parametrize("coretype, small_gemm", [
+    ("Sandybridge", False), ("Haswell", False),
+    pytest.param("SkylakeX", True, marks=pytest.mark.skipif(not AVX512, reason="this CPU has no AVX-512")),
+])
+def test_openblas_kernels_names_the_kernels_openblas_loaded(coretype, small_gemm):
     # a fresh interpreter, so that OpenBLAS reads OPENBLAS_CORETYPE when numpy loads it
     env = {**os.environ, "OPENBLAS_CORETYPE": coretype}
-    code = "from softenv.bench.timing import openblas_kernels; print(openblas_kernels())"
+    code = "from softenv._blas import openblas_kernels, has_small_gemm; print(openblas_kernels(), has_small_gemm())"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == coretype
+    assert out.stdout.split() == [coretype, str(small_gemm)]
 
 
 def test_blas_advice_only_for_avx2_kernels_on_an_avx512_cpu(monkeypatch):

@@ -109,6 +109,18 @@ def test_batched_decode_spans_row_blocks():
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-6)
 
 
+def test_decode_blocks_fit_the_blas_kernels(monkeypatch):
+    from softenv import shape_model
+
+    monkeypatch.setattr(shape_model, "has_small_gemm", lambda: True)  # each block within the small-GEMM path
+    rows = shape_model.decode_block_rows(2883, 11, 4)
+    assert rows * 2883 * 11 <= shape_model.SMALL_GEMM_MAX_MNK < (rows + 1) * 2883 * 11
+    monkeypatch.setattr(shape_model, "has_small_gemm", lambda: False)  # each block's output within 768 KiB
+    rows = shape_model.decode_block_rows(2883, 11, 4)
+    assert rows * 2883 * 4 <= 768 * 1024 < (rows + 1) * 2883 * 4
+    assert shape_model.decode_block_rows(10**7, 11, 8) == 4  # never fewer than a few shapes per product
+
+
 def test_decode_and_encode_refuse_bad_input():
     d = paper_dataset(441, n_deformations=3)
     model = ShapeModel("scree").fit(d.shapes)

@@ -46,7 +46,7 @@ def bench_decode(quick: bool, reference: Timing) -> list[Row]:
     # the same products into one cache-resident block: the arithmetic alone, with no output traffic
     aug = model._augmented[np.dtype(np.float32)]
     lifted = np.hstack([np.ones((n, 1), np.float32), batch])
-    block = np.empty((decode_block_rows(model.n_features_, 4), model.n_features_), np.float32)
+    block = np.empty((decode_block_rows(model.n_features_, len(aug), 4), model.n_features_), np.float32)
     starts = range(0, n - len(block) + 1, len(block))
     compute = measure(lambda: [np.dot(lifted[s:s + len(block)], aug, out=block) for s in starts], number=1, repeats=5)
     per_shape = compute.median / (len(starts) * len(block))

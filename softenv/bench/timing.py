@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ctypes
 import os
 import platform
 import time
@@ -10,6 +9,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
+
+from .._blas import openblas_kernels
 
 
 @dataclass
@@ -97,24 +98,6 @@ def _cpuinfo() -> dict[str, str]:
     except OSError:
         pass
     return fields
-
-
-def openblas_kernels() -> str:
-    """The kernel set numpy's OpenBLAS picked when it loaded ("Haswell", "SkylakeX", ...), or "unknown"."""
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = {line.split()[-1] for line in fh if "openblas" in line.lower() and ".so" in line}
-    except OSError:
-        return "unknown"
-    for path in sorted(paths, key=lambda p: "numpy" not in p):  # numpy's own copy first
-        lib = ctypes.CDLL(path)  # already loaded: this only returns its handle
-        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename64_",
-                       "openblas_get_corename"):
-            getter = getattr(lib, symbol, None)
-            if getter is not None:
-                getter.restype = ctypes.c_char_p
-                return getter().decode()
-    return "unknown"
 
 
 AVX512_FLAGS = ("avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl")
