@@ -123,7 +123,7 @@ def blas_advice() -> str | None:
     fix = ("unset it (env -u OPENBLAS_CORETYPE) to let OpenBLAS choose, unless bitwise-identical BLAS results "
            "across hosts matter more" if pinned else "set OPENBLAS_CORETYPE=SkylakeX")
     return (f"{cause} its {kernels} (AVX2) kernels on this AVX-512 CPU; batched decoding is bound by the FMA "
-            f"rate and takes about 1.3x as long with them; {fix}")
+            f"rate and takes about 1.5x as long with them on Zen 5; {fix}")
 
 
 def machine_info() -> dict[str, Any]:
