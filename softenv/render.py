@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 import matplotlib
+import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -103,19 +104,20 @@ class SphereFigure:
     """
 
     def __init__(self, triangles: np.ndarray, radius: float, size_px: int = 320, max_displacement: float | None = None,
-                 view: View | None = None, interactive: bool = False) -> None:
+                 view: View | None = None, interactive: bool = False, panels: int = 1) -> None:
         self.triangles = triangles
         self.radius = radius
         self.view = view or View()
         self.vmax = max_displacement if max_displacement is not None else 0.4 * radius
         self.cmap = TONGUE
         dpi = 100
+        size = (panels * size_px / dpi, size_px / dpi)          # further panels sit right of the sphere
         if interactive:
-            self.figure = plt.figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+            self.figure = plt.figure(figsize=size, dpi=dpi)
         else:
-            self.figure = Figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+            self.figure = Figure(figsize=size, dpi=dpi)
             FigureCanvasAgg(self.figure)
-        self.ax = self.figure.add_axes((0, 0, 1, 1))
+        self.ax = self.figure.add_axes((0, 0, 1 / panels, 1))
         lim = 1.25 * radius
         self.ax.set_xlim(-lim, lim)
         self.ax.set_ylim(-lim, lim)
@@ -162,3 +164,66 @@ class SphereFigure:
     def close(self) -> None:
         if plt.fignum_exists(getattr(self.figure, "number", -1)):
             plt.close(self.figure)
+
+
+def midline_profile(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """The surface's section by the sagittal plane ``y = 0``: ``(m, 2)`` points ``(x, z)`` ordered by
+    angle (edges that cross the plane, cut by linear interpolation)."""
+    edges = np.unique(np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]),
+                              axis=1), axis=0)
+    a, b = points[edges[:, 0]], points[edges[:, 1]]
+    cross = (a[:, 1] * b[:, 1] < 0) | ((a[:, 1] == 0) & (b[:, 1] != 0))
+    t = a[cross, 1] / (a[cross, 1] - b[cross, 1])
+    cut = a[cross] + t[:, None] * (b[cross] - a[cross])
+    order = np.argsort(np.arctan2(cut[:, 2], cut[:, 0]))
+    return cut[order][:, [0, 2]]
+
+
+class SagittalPanel:
+    """The device's side view beside the sphere: the tongue's midline section (deformed and at
+    rest), the blade, the upper incisors, the hand and the contact force."""
+
+    def __init__(self, figure: Any, rect: tuple[float, float, float, float], triangles: np.ndarray,
+                 radius: float) -> None:
+        self.triangles = triangles
+        self.ax = figure.add_axes(rect)
+        self.ax.set_xlim(-2.4 * radius, 2.8 * radius)          # the blade reaches 2 R behind, the hand 2.3 R ahead
+        self.ax.set_ylim(-1.3 * radius, 3.9 * radius)
+        self.ax.set_aspect("equal")
+        self.ax.axis("off")
+        theta = np.linspace(0, 2 * np.pi, 97)
+        self.ax.plot(radius * np.cos(theta), radius * np.sin(theta), ls="--", lw=0.6, color="0.6")
+        self.tongue = self.ax.fill([0], [0], color="#e8909a", alpha=0.9, lw=0.8, ec="#6e0f26")[0]
+        self.blade = self.ax.fill([0], [0], color="#9aa5b1", ec="#2f3b48", lw=1.0)[0]
+        self.incisor = matplotlib.patches.Circle((0, 0), 1.0, color="#fffbe6", ec="#8a7f50", lw=1.0)
+        self.ax.add_patch(self.incisor)
+        (self.handle,) = self.ax.plot([], [], color="#2f3b48", lw=2.5)
+        (self.hand,) = self.ax.plot([], [], "o", color="#19c37d", ms=6)
+        self.arrow = self.ax.annotate("", xy=(0, 0), xytext=(0, 0),
+                                      arrowprops={"arrowstyle": "-|>", "color": "#19c37d", "lw": 1.5})
+        self.text = self.ax.text(0.02, 0.02, "", transform=self.ax.transAxes, fontsize=7, color="0.15")
+        self.radius = radius
+
+    def update(self, points: np.ndarray, device: dict[str, Any]) -> None:
+        """Redraw with the deformed surface ``points`` ``(n, 3)`` and a device drawing (see
+        ``softenv.devices.laryngoscope``)."""
+        profile = midline_profile(points, self.triangles)
+        self.tongue.set_xy(profile)
+        self.blade.set_xy(device["outline"])
+        ix, iy, ir = device["incisor"]
+        self.incisor.center, self.incisor.radius = (ix, iy), ir
+        gx, gy, _ = device["hand"]
+        heel = device["outline"][1]
+        self.handle.set_data([heel[0], gx], [heel[1], gy])
+        self.hand.set_data([gx], [gy])
+        contact = device["contact"]
+        if contact is not None and device["tongue_force"] > 0:
+            c = np.asarray(contact)
+            tip = c * (1 - 1e-3)
+            tail = c + c / np.linalg.norm(c) * 0.02 * device["tongue_force"] / 40.0 * self.radius / 0.03
+            self.arrow.set_position(tuple(tail))
+            self.arrow.xy = tuple(tip)
+            self.arrow.set_visible(True)
+        else:
+            self.arrow.set_visible(False)
+        self.text.set_text(f"tongue {device['tongue_force']:.1f} N   incisors {device['incisor_force']:.1f} N")

@@ -1,6 +1,10 @@
 """The Gymnasium environments: scene config, scene building, parts, the single env and its batched
 twin, rendering and the SB3 adapter. Registration (``register_envs``) uses string entry points, so
-``import softenv`` stays light; the env modules load when an env is made."""
+``import softenv`` stays light; the env modules load when an env is made.
+
+Every id is registered with its scene overrides as the ``base_scene`` keyword; the sections a user
+passes to ``gym.make`` are merged into it key by key (so ``gym.make("SoftSphereHaptic-v0",
+device={"coupling_stiffness": 1e4})`` keeps the laryngoscope)."""
 
 from __future__ import annotations
 
@@ -10,7 +14,7 @@ import gymnasium as gym
 
 from .config import default_config, describe_config, make_config
 
-# id -> scene overrides; every id steps 100 times per episode (task.horizon's default)
+# ideal-device ids -> scene overrides; each steps 100 times per episode (task.horizon's default)
 ENV_SCENES: dict[str, dict[str, Any]] = {
     "SoftSphere-v0": {},
     "SoftSphereViscoelastic-v0": {"dynamics": {"kind": "viscoelastic"}},
@@ -18,15 +22,25 @@ ENV_SCENES: dict[str, dict[str, Any]] = {
 }
 MAX_EPISODE_STEPS = 100
 
+# laryngoscope ids: 50 Hz control (20 substeps of 1 ms), 5 s to reach, 10 s for the procedure
+_HAPTIC = {"device": {"kind": "laryngoscope"}, "dynamics": {"dt": 0.02}}
+HAPTIC_SCENES: dict[str, dict[str, Any]] = {
+    "SoftSphereHaptic-v0": {**_HAPTIC, "task": {"horizon": 250}},
+    "SoftSphereHapticProcedure-v0": {**_HAPTIC, "task": {"kind": "procedure", "horizon": 500}},
+}
+
 
 def register_envs() -> None:
     """Register every SoftSphere id with Gymnasium (safe to call again)."""
-    for env_id, scene in ENV_SCENES.items():
+    for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items():
         if env_id in gym.registry:
             continue
-        gym.register(id=env_id, entry_point="softenv.envs.soft_sphere:SoftSphereEnv",
-                     vector_entry_point="softenv.envs.soft_sphere:SoftSphereVectorEnv",
-                     max_episode_steps=MAX_EPISODE_STEPS, kwargs=scene)
+        module = "haptic:SoftSphereHaptic" if env_id in HAPTIC_SCENES else "soft_sphere:SoftSphere"
+        gym.register(id=env_id, entry_point=f"softenv.envs.{module}Env",
+                     vector_entry_point=f"softenv.envs.{module}VectorEnv",
+                     max_episode_steps=scene.get("task", {}).get("horizon", MAX_EPISODE_STEPS),
+                     kwargs={"base_scene": scene})
 
 
-__all__ = ["ENV_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config", "register_envs"]
+__all__ = ["ENV_SCENES", "HAPTIC_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config",
+           "register_envs"]

@@ -103,12 +103,29 @@ SCHEMA: dict[str, dict[str, Field]] = {
                              "grid of the tabulated exact response (insertion, lateral, normal, sideways)"),
     },
     "device": {
-        "kind": Field("ideal", "", "ideal", _choice("ideal"), "ideal: force = scaled action"),
+        "kind": Field("ideal", "", "ideal | laryngoscope", _choice("ideal", "laryngoscope"),
+                      "ideal: force = scaled action; laryngoscope: a blade in pymunk moved by a hand (softenv.devices)"),
         "insertion_deg": Field((30.0, 120.0), "deg", "within [0, 180]", _pair(0, 180),
                                "contact range along the midline, from the front (0) over the top (90)"),
         "lateral_deg": Field(20.0, "deg", "(0, 80]", _real(0, 80, lo_open=True), "contact range off the midline, +-"),
         "max_normal_force": Field(40.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest pressing force"),
         "max_sideways_force": Field(10.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest sideways force, +-"),
+        # the laryngoscope's parameters (ignored by the ideal device); see softenv.devices.laryngoscope
+        "blade_mass": Field(0.08, "kg", "[0.005, 10]", _real(0.005, 10), "Macintosh 3 blade (stainless, ~80 g)"),
+        "handle_mass": Field(0.15, "kg", "[0, 10]", _real(0, 10), "battery handle held by the hand (~150 g)"),
+        "coupling_stiffness": Field(2000.0, "N/m", "(0, 1e7]", _real(0, 1e7, lo_open=True),
+                                    "virtual coupling hand -> blade, translation (and the lateral sweep)"),
+        "coupling_damping": Field(20.0, "N s/m", "[0, 1e5]", _real(0, 1e5), "virtual coupling damping"),
+        "rotational_stiffness": Field(30.0, "N m/rad", "(0, 1e5]", _real(0, 1e5, lo_open=True),
+                                      "virtual coupling, wrist pitch (CHAI3D's tool example: 30)"),
+        "rotational_damping": Field(0.1, "N m s/rad", "[0, 1e3]", _real(0, 1e3), "virtual coupling, pitch damping"),
+        "max_hand_speed": Field(0.2, "m/s", "(0, 5]", _real(0, 5, lo_open=True), "hand speed at |action| = 1 (insert, press)"),
+        "max_sweep_speed": Field(0.1, "m/s", "(0, 5]", _real(0, 5, lo_open=True), "hand sideways speed at |action| = 1"),
+        "max_pitch_rate": Field(1.0, "rad/s", "(0, 20]", _real(0, 20, lo_open=True), "wrist pitch rate at |action| = 1"),
+        "friction": Field(0.5, "", "[0, 5]", _real(0, 5), "blade-tongue Coulomb friction (limits the sweep force)"),
+        "max_substep": Field(1e-3, "s", "[1e-6, 1e-3]", _real(1e-6, 1e-3), "longest physics substep (1 kHz or finer)"),
+        "haptic_preset": Field("omega", "", "touch | falcon | omega", _choice("touch", "falcon", "omega"),
+                               "force-feedback device whose limits shape haptic_force_N"),
     },
     "dynamics": {
         "kind": Field("quasi_static", "", "quasi_static | viscoelastic", _choice("quasi_static", "viscoelastic"),
@@ -140,6 +157,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "force_weight": Field(0.0, "", ">= 0", _real(0, None), "weight of -(force above safe_force) / safe_force"),
         "safe_force": Field(30.0, "N", "> 0", _real(0, None, lo_open=True), "force above which the penalty applies"),
         "smoothness_weight": Field(0.0, "", ">= 0", _real(0, None), "weight of -mean squared action change"),
+        "incisor_weight": Field(1.0, "", ">= 0", _real(0, None),
+                                "weight of -(incisor force) / safe_force (laryngoscope; any force is an error)"),
     },
     "render": {
         "size": Field(320, "px", "64-2048", _int(64, 2048), "frame width and height"),
@@ -167,6 +186,11 @@ def make_config(base: dict[str, dict[str, Any]] | None = None, **overrides: Any)
                 raise ValueError(f"unknown key {key!r} in scene section {section!r}; valid keys: {_keys_help(section)}")
             config[section][key] = value
     return validate_config(config)
+
+
+def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """An env's config: its registered scene overrides, then the caller's sections, merged key by key."""
+    return make_config(make_config(**(base_scene or {})), **sections)
 
 
 def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:

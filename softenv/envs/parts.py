@@ -1,4 +1,4 @@
-"""The parts an environment is composed of: device, dynamics and task.
+"""The parts an environment is composed of besides its device (``softenv.devices``): dynamics and task.
 
 Each part works on arrays with any leading batch shape, so the single environment (state of shape
 ``(k,)``) and its batched twin (``(N, k)``) call the same code. Scalar twins exist only where the
@@ -12,40 +12,6 @@ import math
 from typing import Any
 
 import numpy as np
-
-from ..forces import Workspace
-
-
-class IdealDevice:
-    """Action in ``[-1, 1]^4`` -> force features: ``low + (a + 1) (high - low) / 2`` per column.
-
-    Columns: insertion (m of arc along the midline), lateral (m of arc off the midline), normal force
-    (N, pressing), sideways force (N, toward +y). The device has no dynamics: the force follows the
-    command at once.
-    """
-
-    def __init__(self, workspace: Workspace) -> None:
-        low, high = np.asarray(workspace.low), np.asarray(workspace.high)
-        self.mid = (low + high) / 2
-        self.half = (high - low) / 2
-        self._mid, self._half = self.mid.tolist(), self.half.tolist()
-        self.rest_action = np.array([0.0, 0.0, -1.0, 0.0], dtype=np.float32)   # zero force, mid contact
-
-    def features(self, action: np.ndarray) -> np.ndarray:
-        """Force features of actions ``(..., 4)``."""
-        return self.mid + action * self.half
-
-    def features_one(self, action: list[float]) -> list[float]:
-        """Scalar twin of :meth:`features` for one action given as Python floats."""
-        return [m + a * h for m, a, h in zip(self._mid, action, self._half)]
-
-    def normalised(self, features: np.ndarray) -> np.ndarray:
-        """Features mapped back onto ``[-1, 1]`` (the device state in observations)."""
-        return (features - self.mid) / self.half
-
-    def normalised_one(self, features: list[float]) -> list[float]:
-        """Scalar twin of :meth:`normalised`."""
-        return [(f - m) / h for f, m, h in zip(features, self._mid, self._half)]
 
 
 class Dynamics:
@@ -123,26 +89,6 @@ def target_schedule(kind: str, target: np.ndarray, start_insertion: float, horiz
     out[:, 2] = target[2] * (0.1 + 0.9 * phase[:, 1])
     out[:, 3] = target[3] * phase[:, 2]
     return out
-
-
-class ScalarOps:
-    """``sqrt`` and ``max(x, 0)`` for Python floats (the single environment)."""
-
-    sqrt = staticmethod(math.sqrt)
-
-    @staticmethod
-    def positive(x: float) -> float:
-        return x if x > 0.0 else 0.0
-
-
-class ArrayOps:
-    """``sqrt`` and ``max(x, 0)`` for arrays (the batched environment)."""
-
-    sqrt = staticmethod(np.sqrt)
-
-    @staticmethod
-    def positive(x: np.ndarray) -> np.ndarray:
-        return np.maximum(x, 0.0)
 
 
 def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,

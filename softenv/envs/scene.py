@@ -25,6 +25,7 @@ from ..tissue import AnalyticTissue, TissueParams
 from .config import config_key
 
 _SCENES: dict[str, "Scene"] = {}
+DEVICE_BOX_KEYS = ("insertion_deg", "lateral_deg", "max_normal_force", "max_sideways_force")
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,7 +90,9 @@ def device_workspace(config: dict) -> Workspace:
 
 def build_scene(config: dict, progress: bool = False) -> Scene:
     """The scene for a validated config (memoised per process, files cached on disk)."""
-    key = config_key(config, ("tissue", "mesh", "shape_model", "response", "device"))
+    # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not)
+    box = {"device": {k: config["device"][k] for k in DEVICE_BOX_KEYS}}
+    key = config_key({**config, **box}, ("tissue", "mesh", "shape_model", "response", "device"))
     if key in _SCENES:
         return _SCENES[key]
     t = config["tissue"]

@@ -11,8 +11,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .config import make_config
-from .parts import ArrayOps, ScalarOps, reward_terms
+from .config import scene_config
+from .._ops import ArrayOps, ScalarOps
+from .parts import reward_terms
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .world import World
 
@@ -119,13 +120,14 @@ class SoftSphereEnv(gym.Env):
 
     def __new__(cls, *args: Any, obs_mode: str = "vector", **kwargs: Any) -> "SoftSphereEnv":
         # goal-conditioned tools detect a GoalEnv by its compute_reward: only dict observations have one
-        if cls is SoftSphereEnv and obs_mode == "dict":
-            cls = SoftSphereGoalEnv
+        if obs_mode == "dict" and cls in GOAL_TWINS:
+            cls = GOAL_TWINS[cls]
         return super().__new__(cls)
 
-    def __init__(self, render_mode: str | None = None, obs_mode: str = "vector", **scene: Any) -> None:
+    def __init__(self, render_mode: str | None = None, obs_mode: str = "vector",
+                 base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
         check_render_mode(render_mode)
-        self.world = World(make_config(**scene), obs_mode)
+        self.world = World(scene_config(base_scene, scene), obs_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"]}
         self.render_mode = render_mode
         self.action_space = self.world.action_space
@@ -150,10 +152,10 @@ class SoftSphereEnv(gym.Env):
         self._z = w.b_rest.copy()
         self._b = w.b_rest.copy()
         self._features = w.scene.rest_features.tolist()
-        self._prev = self._device.rest_action.astype(np.float64).tolist()
+        self._prev = self._start_device()
         self._t, self._agent_cum, self._peak = 0, 0.0, 0.0
         self._last_target = self._target_b[0]
-        obs = w.observe(self._b, self._target_b[0], self._device.normalised_one(self._features), self._prev)
+        obs = w.observe(self._b, self._target_b[0], self._device_obs(self._features), self._prev)
         return obs, {}
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -161,7 +163,7 @@ class SoftSphereEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         a = _check_action_one(action)
         w = self.world
-        f = self._device.features_one(a)
+        f, normal, sideways = self._actuate(a)
         b = w.dynamics.step(self._z, w.response_one(f))
         t = self._t
         ti = t if t < self._last_index else self._last_index
@@ -171,7 +173,7 @@ class SoftSphereEnv(gym.Env):
         p = self._prev
         change = (a[0] - p[0]) * (a[0] - p[0]) + (a[1] - p[1]) * (a[1] - p[1]) + (a[2] - p[2]) * (a[2] - p[2]) \
             + (a[3] - p[3]) * (a[3] - p[3])
-        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, self._sq_ref[ti], f[2], f[3], change,
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, self._sq_ref[ti], normal, sideways, change,
                                                                        w.weights, ScalarOps)
         self._agent_cum += ratio
         self._peak = force if force > self._peak else self._peak
@@ -183,16 +185,40 @@ class SoftSphereEnv(gym.Env):
         info = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                 "shape_error_mm": math.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": self._peak,
                 "is_success": success, "normalized_score": score}
+        extra = self._device_terms(info)
+        reward += extra
         upcoming = self._targets[t + 1 if t + 1 < self._last_index else self._last_index]
         if w.obs_mode == "dict":
-            obs = w.observe(b, target, self._device.normalised_one(f), a)
+            obs = w.observe(b, target, self._device_obs(f), a)
             shape = float(w.goal_shape_term(obs["achieved_goal"], obs["desired_goal"]))
-            reward = shape + (force_term + smooth)
+            reward = shape + (force_term + smooth + extra)
             info["reward_shape"] = shape
         else:
-            obs = w.observe(b, upcoming, self._device.normalised_one(f), a)
+            obs = w.observe(b, upcoming, self._device_obs(f), a)
         terminated = w.terminate_on_success and success
         return obs, reward, terminated, self._t >= w.horizon, info
+
+    # -- the device (the ideal one here; the laryngoscope env overrides these) ---------------------
+
+    def _start_device(self) -> list[float]:
+        """Put the device at rest; returns the previous action an episode starts with."""
+        return self._device.rest_action.astype(np.float64).tolist()
+
+    def _actuate(self, a: list[float]) -> tuple[list[float], float, float]:
+        """Apply a checked action: force features for the response, and the normal and sideways force (N)."""
+        f = self._device.features_one(a)
+        return f, f[2], f[3]
+
+    def _device_obs(self, features: list[float]) -> list[float]:
+        return self._device.normalised_one(features)
+
+    def _device_terms(self, info: dict[str, Any]) -> float:
+        """Add the device's own terms to ``info``; returns their reward (none for the ideal device)."""
+        return 0.0
+
+    def _render_device(self) -> Any:
+        """What the renderer draws of the device beside the sphere (nothing for the ideal device)."""
+        return None
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -203,7 +229,7 @@ class SoftSphereEnv(gym.Env):
         if self._renderer is None:
             self._renderer = SceneRenderer(self.world, self.render_mode)
         caption = f"step {self._t}   force {math.hypot(self._features[2], self._features[3]):.1f} N"
-        return self._renderer.frame(self._b, self._last_target, np.array(self._features), caption)
+        return self._renderer.frame(self._b, self._last_target, np.array(self._features), caption, self._render_device())
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -216,12 +242,22 @@ class SoftSphereEnv(gym.Env):
         return state
 
 
-class SoftSphereGoalEnv(SoftSphereEnv):
-    """:class:`SoftSphereEnv` with ``obs_mode="dict"`` (made by it): adds HER's ``compute_reward``."""
+class GoalReward:
+    """Mixin for ``obs_mode="dict"``: HER's ``compute_reward``."""
+
+    world: World
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
         """Reward from goals, vectorised over leading axes (see :meth:`World.compute_reward`)."""
         return self.world.compute_reward(achieved_goal, desired_goal, info)
+
+
+class SoftSphereGoalEnv(GoalReward, SoftSphereEnv):
+    """:class:`SoftSphereEnv` with ``obs_mode="dict"`` (made by it): adds HER's ``compute_reward``."""
+
+
+# env class -> its goal-conditioned twin, which ``__new__`` picks for dict observations
+GOAL_TWINS: dict[type, type] = {SoftSphereEnv: SoftSphereGoalEnv}
 
 
 class SoftSphereVectorEnv(VectorEnv):
@@ -240,13 +276,13 @@ class SoftSphereVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-                 **scene: Any) -> None:
+                 base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
         check_render_mode(render_mode)
         if max_episode_steps is not None:
             scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
-        self.world = World(make_config(**scene), obs_mode)
+        self.world = World(scene_config(base_scene, scene), obs_mode)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"],
                          "autoreset_mode": self.autoreset_mode}
@@ -285,7 +321,7 @@ class SoftSphereVectorEnv(VectorEnv):
         self._episode = self.world.start_episodes(self._rngs, [target] * self.num_envs)
         self._start(np.ones(self.num_envs, dtype=bool))
         self._autoreset[:] = False
-        return self._observe(self._b, self._upcoming_target(), self._features, self._prev), {}
+        return self._observe(self._b, self._upcoming_target(), self._device_obs(), self._prev), {}
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if self._episode is None:
@@ -298,7 +334,7 @@ class SoftSphereVectorEnv(VectorEnv):
         T = ep.sq_ref.shape[1]
         rows = np.arange(self.num_envs)
         ti = np.minimum(self._t, T - 1)
-        f = w.device.features(a)
+        f, normal, sideways = self._actuate(a, stepped)
         g = w.response(f)
         z = self._z.copy() if w.dynamics.stateful else self._z      # the creep state is committed per row below
         b = w.dynamics.step(z, g)
@@ -307,7 +343,7 @@ class SoftSphereVectorEnv(VectorEnv):
         sq = np.sum(d * d, axis=-1)
         c = a - self._prev
         change = c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2] + c[:, 3] * c[:, 3]
-        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, ep.sq_ref[rows, ti], f[:, 2], f[:, 3], change,
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, ep.sq_ref[rows, ti], normal, sideways, change,
                                                                        w.weights, ArrayOps)
         agent_cum = self._agent_cum + ratio
         peak = np.maximum(self._peak, force)
@@ -324,13 +360,16 @@ class SoftSphereVectorEnv(VectorEnv):
         info_values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                        "shape_error_mm": np.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                        "is_success": success, "normalized_score": score}
+        extra = self._device_terms(info_values)
+        reward = reward + extra
+        device_obs = self._device_obs()
         if w.obs_mode == "dict":
-            obs = self._observe(self._b, self._last_target, self._features, self._prev)
+            obs = self._observe(self._b, self._last_target, device_obs, self._prev)
             shape = w.goal_shape_term(obs["achieved_goal"], obs["desired_goal"])
-            reward = shape + (force_term + smooth)
+            reward = shape + (force_term + smooth + extra)
             info_values["reward_shape"] = shape
         else:
-            obs = self._observe(self._b, self._upcoming_target(), self._features, self._prev)
+            obs = self._observe(self._b, self._upcoming_target(), device_obs, self._prev)
         reward = np.where(s, reward, 0.0)
         done = terminated | truncated
         infos: dict[str, Any] = {}
@@ -363,12 +402,35 @@ class SoftSphereVectorEnv(VectorEnv):
             return None
         if not self._renderers:
             self._renderers = [SceneRenderer(self.world, self.render_mode) for _ in range(self.num_envs)]
-        return tuple(r.frame(self._b[i], self._last_target[i], self._features[i]) for i, r in enumerate(self._renderers))
+        return tuple(r.frame(self._b[i], self._last_target[i], self._features[i], "", self._render_device(i))
+                     for i, r in enumerate(self._renderers))
 
     def close_extras(self, **kwargs: Any) -> None:
         for r in self._renderers:
             r.close()
         self._renderers = []
+
+    # -- the device (the ideal one here; the laryngoscope env overrides these) ---------------------
+
+    def _start_device(self, mask: np.ndarray) -> np.ndarray:
+        """Put the masked envs' devices at rest; returns the previous action an episode starts with."""
+        return self.world.device.rest_action
+
+    def _actuate(self, a: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Apply checked actions (the stepped rows count): force features, normal and sideways force (N)."""
+        f = self.world.device.features(a)
+        return f, f[:, 2], f[:, 3]
+
+    def _device_obs(self, mask: np.ndarray | None = None) -> np.ndarray:
+        """The device part of the observation, of every env or of the masked ones."""
+        features = self._features if mask is None else self._features[mask]
+        return self.world.device.normalised(features)
+
+    def _device_terms(self, info: dict[str, np.ndarray]) -> Any:
+        return 0.0
+
+    def _render_device(self, i: int) -> Any:
+        return None
 
     # -- helpers --------------------------------------------------------------------------------
 
@@ -377,7 +439,7 @@ class SoftSphereVectorEnv(VectorEnv):
         self._z[mask] = w.b_rest
         self._b[mask] = w.b_rest
         self._features[mask] = w.scene.rest_features
-        self._prev[mask] = w.device.rest_action
+        self._prev[mask] = self._start_device(mask)
         self._t[mask] = 0
         self._agent_cum[mask] = 0.0
         self._peak[mask] = 0.0
@@ -396,12 +458,12 @@ class SoftSphereVectorEnv(VectorEnv):
         T = self._episode.sq_ref.shape[1]
         return self._episode.target_b[np.arange(self.num_envs), np.minimum(self._t, T - 1)]
 
-    def _observe(self, b: np.ndarray, target: np.ndarray, features: np.ndarray, prev: np.ndarray) -> Any:
-        return self.world.observe(b, target, self.world.device.normalised(features), prev)
+    def _observe(self, b: np.ndarray, target: np.ndarray, device_obs: np.ndarray, prev: np.ndarray) -> Any:
+        return self.world.observe(b, target, device_obs, prev)
 
     def _write_rows(self, obs: Any, mask: np.ndarray) -> Any:
         """Replace the masked rows of ``obs`` with the fresh episodes' first observations."""
-        fresh = self._observe(self._b[mask], self._episode.target_b[mask, 0], self._features[mask], self._prev[mask])
+        fresh = self._observe(self._b[mask], self._episode.target_b[mask, 0], self._device_obs(mask), self._prev[mask])
         if isinstance(obs, dict):
             for key in obs:
                 obs[key][mask] = fresh[key]
@@ -459,7 +521,8 @@ def _add_masked(infos: dict[str, Any], values: dict[str, np.ndarray], mask: np.n
     if not mask.any():
         return
     for key, value in values.items():
-        infos[key] = np.where(mask, value, np.zeros((), dtype=value.dtype))
+        rows = mask.reshape(mask.shape + (1,) * (np.ndim(value) - 1))      # per-env vectors: mask each row
+        infos[key] = np.where(rows, value, np.zeros((), dtype=value.dtype))
         infos[f"_{key}"] = mask.copy()
 
 

@@ -18,7 +18,9 @@ import numpy as np
 from gymnasium import spaces
 
 from ..response import TabulatedResponse
-from .parts import Dynamics, IdealDevice, TargetFamily, target_schedule
+from ..devices import device_obs_names
+from ..devices.ideal import IdealDevice
+from .parts import Dynamics, TargetFamily, target_schedule
 from .scene import Scene, build_scene, degrees_to_features
 
 OBS_MODES = ("vector", "dict", "vertices")
@@ -47,7 +49,9 @@ class World:
         self.obs_mode = obs_mode
         self.scene: Scene = build_scene(config)
         scene = self.scene
-        self.device = IdealDevice(scene.workspace)
+        self.device = IdealDevice(scene.workspace)        # the force-feature box in action units
+        self.device_kind = config["device"]["kind"]
+        self.device_obs_size = len(device_obs_names(self.device_kind))
         self.dynamics = Dynamics(**config["dynamics"])
         task = config["task"]
         ranges = [task[key] for key in ("target_insertion_deg", "target_lateral_deg", "target_normal_force",
@@ -87,19 +91,20 @@ class World:
 
     @property
     def obs_size(self) -> int:
-        return 2 * self.k + 8
+        """``2 k`` shape values, the device's state and the previous action (4)."""
+        return 2 * self.k + self.device_obs_size + 4
 
     def _observation_space(self) -> spaces.Space:
         b_low, b_high = self.scene.b_bounds
         margin = 1e-6 * (b_high - b_low) + 1e-12           # float rounding of convex combinations
         lo = (b_low - margin) * self.inv_sqrt
         hi = (b_high + margin) * self.inv_sqrt
-        ones = np.ones(8)
+        ones = np.ones(self.device_obs_size + 4)
         low = np.concatenate([lo, lo, -ones]).astype(np.float32)
         high = np.concatenate([hi, hi, ones]).astype(np.float32)
         if self.obs_mode == "dict":
             goal = spaces.Box(low[:self.k], high[:self.k], dtype=np.float32)
-            return spaces.Dict({"observation": spaces.Box(-1.0, 1.0, (8,), np.float32),
+            return spaces.Dict({"observation": spaces.Box(-1.0, 1.0, (self.device_obs_size + 4,), np.float32),
                                 "achieved_goal": goal, "desired_goal": goal})
         if self.obs_mode == "vertices":
             # vertices are linear in b, and b stays in its box: bound each coordinate over the box
@@ -115,15 +120,15 @@ class World:
 
     def observe(self, b: np.ndarray, target_b: np.ndarray, device_state: Any, prev_action: Any) -> Any:
         """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
-        k = self.k
-        obs = np.empty(b.shape[:-1] + (2 * k + 8,), np.float32)      # float64 values rounded on assignment
+        k, d = self.k, 2 * self.k + self.device_obs_size
+        obs = np.empty(b.shape[:-1] + (self.obs_size,), np.float32)   # float64 values rounded on assignment
         obs[..., :k] = b * self.inv_sqrt
         obs[..., k:2 * k] = target_b * self.inv_sqrt
         if isinstance(device_state, list):                              # the single env's fast path
             obs[2 * k:] = device_state + prev_action
         else:
-            obs[..., 2 * k:2 * k + 4] = device_state
-            obs[..., 2 * k + 4:] = prev_action
+            obs[..., 2 * k:d] = device_state
+            obs[..., d:] = prev_action
         if self.obs_mode == "dict":
             return {"observation": obs[..., 2 * k:].copy(), "achieved_goal": obs[..., :k].copy(),
                     "desired_goal": obs[..., k:2 * k].copy()}

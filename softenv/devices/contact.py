@@ -1,0 +1,100 @@
+"""The blade-tongue contact law, consistent with the scene's tissue.
+
+**Normal law.** The analytic tissue (``softenv.tissue``) indents the surface at the contact by
+``W(P)`` under a normal load ``P``: linear (``W = c_n P``) or Fung-stiffening, then smoothly
+saturated below 80 % of the radius. The contact law is its inverse: a blade that penetrates the
+undeformed sphere by ``delta`` feels ``P(delta) = W^-1(delta)``. A press held with force ``F``
+therefore settles at exactly the indentation that the response's shape for ``F`` has. ``P(delta)``
+is tabulated once per scene on a uniform grid of ``delta`` (4,096 intervals, inverted from a dense
+geometric grid of loads) and interpolated linearly; past the table's last node (``P`` at 1e5 times
+the design force, or where saturation flattens ``W`` to the float resolution) it continues with the
+last slope. Lookups use only ``+ - * /`` and truncation, so the single env and the batched twin get
+the same bits.
+
+**Stiff-safe application.** Explicit penalty springs are stable only for ``K < 4 m / h^2``. The
+substep ``h`` is chosen for the stiffness at the design force ``K_ref``; the table's slope beyond it
+(the saturation barrier makes it grow without bound) is applied linearly implicitly (backward Euler
+along the contact normal with the blade's effective mass there), which is stable for any slope. The
+contact damper is explicit and kept below ``m_eff / h`` (half the stability limit ``2 m / h``).
+
+**Lateral law (the sweep).** While in contact the tongue's surface sticks to the blade: the sideways
+force is ``Q = k_t (y_blade - y_anchor)`` with the tissue's tangential stiffness
+``k_t = 1 / c_t`` (``TissueParams.tangential_compliance``: the drag the response gives for ``Q``),
+limited by Coulomb friction ``|Q| <= mu P``; past it the anchor slides. Off contact the anchor follows
+the blade and ``Q = 0``. ``y_anchor`` is the lateral position of the loaded surface point at rest:
+the response's ``lateral`` feature.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import SphereMesh
+from ..tissue import AnalyticTissue, TissueParams
+
+TABLE_INTERVALS = 4096
+_LOAD_SPAN = (1e-7, 1e5)        # loads tabulated, as multiples of the design force
+
+
+class TongueContact:
+    """Normal law ``P(delta)`` (tabulated inverse of the tissue's indentation) and lateral stiffness.
+
+    Args:
+        tissue: the scene's tissue parameters.
+        mesh: the scene's surface sampling (only to build the analytic tissue; the law does not
+            depend on it).
+        design_force: the device's largest pressing force (N): sets the reference stiffness.
+        friction: Coulomb coefficient of the blade on the tongue (lateral sticking limit).
+    """
+
+    def __init__(self, tissue: TissueParams, mesh: SphereMesh, design_force: float, friction: float) -> None:
+        self.tissue = tissue
+        self.radius = tissue.radius
+        self.friction = friction
+        self.analytic = AnalyticTissue(mesh, tissue)
+        loads = np.concatenate([[0.0], design_force * np.geomspace(*_LOAD_SPAN, 20_000)])
+        depth = self.indentation(loads)
+        # saturation flattens W(P) to the float resolution at huge loads: keep the strictly rising part
+        flat = np.flatnonzero(np.diff(depth) <= 0)
+        if len(flat):
+            loads, depth = loads[:flat[0] + 1], depth[:flat[0] + 1]
+        if len(loads) < 100:
+            raise ValueError(f"the tissue's indentation does not rise with the load (tissue {tissue}); cannot invert it")
+        self.step = float(depth[-1]) / TABLE_INTERVALS
+        nodes = np.arange(TABLE_INTERVALS + 1) * self.step
+        self.loads = np.interp(nodes, depth, loads)                     # P at each node (N)
+        self.slopes = np.diff(self.loads) / self.step                   # N/m on each interval
+        self.inv_step = 1.0 / self.step
+        self.top = TABLE_INTERVALS - 1                                  # last interval index
+        self.loads_list, self.slopes_list = self.loads[:-1].tolist(), self.slopes.tolist()
+        self.reference_stiffness = self.stiffness(self.indentation(np.array([design_force]))[0])
+        self.lateral_stiffness = 1.0 / tissue.tangential_compliance     # k_t, N/m
+
+    def indentation(self, loads: np.ndarray) -> np.ndarray:
+        """The analytic tissue's indentation ``W`` (m) at the contact under normal loads ``P`` (N)."""
+        R = self.radius
+        loads = np.asarray(loads, dtype=np.float64)
+        contacts = np.tile([0.0, 0.0, R], (loads.size, 1))
+        forces = np.zeros((loads.size, 3))
+        forces[:, 2] = -loads
+        return self.analytic.amplitudes(contacts, forces)["indentation"]
+
+    def load(self, depth: np.ndarray) -> np.ndarray:
+        """``P(delta)`` (N) for penetrations ``delta`` (m, any shape; 0 for ``delta <= 0``)."""
+        d = np.asarray(depth, dtype=np.float64)
+        i = np.minimum(np.maximum(d, 0.0) * self.inv_step, self.top).astype(np.int64)
+        p = self.loads[i] + (d - i * self.step) * self.slopes[i]
+        return np.where(d > 0.0, np.maximum(p, 0.0), 0.0)
+
+    def stiffness(self, depth: float) -> float:
+        """Slope ``dP/d delta`` (N/m) of the tabulated law at a penetration."""
+        i = min(int(max(depth, 0.0) * self.inv_step), self.top)
+        return float(self.slopes[i])
+
+    def potential(self, depth: np.ndarray) -> np.ndarray:
+        """Elastic energy ``int_0^delta P`` (J) stored at penetrations ``delta`` (exact for the table)."""
+        d = np.maximum(np.asarray(depth, dtype=np.float64), 0.0)
+        cumulative = np.concatenate([[0.0], np.cumsum((self.loads[:-1] + self.loads[1:]) * 0.5 * self.step)])
+        i = np.minimum(d * self.inv_step, self.top).astype(np.int64)
+        x = d - i * self.step
+        return cumulative[i] + self.loads[i] * x + 0.5 * self.slopes[i] * x * x
