@@ -7,15 +7,17 @@ undeformed sphere by ``delta`` feels ``P(delta) = W^-1(delta)``. A press held wi
 therefore settles at exactly the indentation that the response's shape for ``F`` has. ``P(delta)``
 is tabulated once per scene on a uniform grid of ``delta`` (4,096 intervals, inverted from a dense
 geometric grid of loads) and interpolated linearly; past the table's last node (``P`` at 1e5 times
-the design force, or where saturation flattens ``W`` to the float resolution) it continues with the
-last slope. Lookups use only ``+ - * /`` and truncation, so the single env and the batched twin get
+the design force, or where saturation flattens ``W`` to the float resolution) it continues as a wall
+(the last slope, at least ``wall_stiffness``). Lookups use only ``+ - * /`` and truncation, so the single env and the batched twin get
 the same bits.
 
 **Stiff-safe application.** Explicit penalty springs are stable only for ``K < 4 m / h^2``. The
-substep ``h`` is chosen for the stiffness at the design force ``K_ref``; the table's slope beyond it
+substep ``h`` is chosen for the stiffness ``K_ref`` at the design force (or where saturation sets in,
+if a soft tissue gets there first); the table's slope beyond it
 (the saturation barrier makes it grow without bound) is applied linearly implicitly (backward Euler
-along the contact normal with the blade's effective mass there), which is stable for any slope. The
-contact damper is explicit and kept below ``m_eff / h`` (half the stability limit ``2 m / h``).
+along the contact normal with the blade's effective mass there, the other forces predicted by the
+last contact force), which is stable for any slope and exact at rest. The contact damper is explicit
+and kept below ``m_eff / h`` (half the stability limit ``2 m / h``).
 
 **Lateral law (the sweep).** While in contact the tongue's surface sticks to the blade: the sideways
 force is ``Q = k_t (y_blade - y_anchor)`` with the tissue's tangential stiffness
@@ -45,9 +47,13 @@ class TongueContact:
             depend on it).
         design_force: the device's largest pressing force (N): sets the reference stiffness.
         friction: Coulomb coefficient of the blade on the tongue (lateral sticking limit).
+        wall_stiffness: least stiffness (N/m) of the law past its last node, where the saturated
+            tissue is a wall: the device sets it 1,000 times its coupling stiffness, so no force the
+            hand can exert pushes the blade more than a fraction of a millimetre beyond.
     """
 
-    def __init__(self, tissue: TissueParams, mesh: SphereMesh, design_force: float, friction: float) -> None:
+    def __init__(self, tissue: TissueParams, mesh: SphereMesh, design_force: float, friction: float,
+                 wall_stiffness: float = 0.0) -> None:
         self.tissue = tissue
         self.radius = tissue.radius
         self.friction = friction
@@ -64,10 +70,13 @@ class TongueContact:
         nodes = np.arange(TABLE_INTERVALS + 1) * self.step
         self.loads = np.interp(nodes, depth, loads)                     # P at each node (N)
         self.slopes = np.diff(self.loads) / self.step                   # N/m on each interval
+        self.slopes[-1] = max(self.slopes[-1], wall_stiffness)          # the barrier past the table's end
         self.inv_step = 1.0 / self.step
         self.top = TABLE_INTERVALS - 1                                  # last interval index
         self.loads_list, self.slopes_list = self.loads[:-1].tolist(), self.slopes.tolist()
-        self.reference_stiffness = self.stiffness(self.indentation(np.array([design_force]))[0])
+        # the explicit part: the stiffness at the design force, or where saturation sets in if sooner
+        knee = tissue.linear_fraction * tissue.max_indentation * tissue.radius
+        self.reference_stiffness = self.stiffness(min(self.indentation(np.array([design_force]))[0], 0.999 * knee))
         self.lateral_stiffness = 1.0 / tissue.tangential_compliance     # k_t, N/m
 
     def indentation(self, loads: np.ndarray) -> np.ndarray:

@@ -14,11 +14,14 @@ from ..devices.laryngoscope import Laryngoscope, LaryngoscopeBatch, Laryngoscope
 from .soft_sphere import GOAL_TWINS, GoalReward, SoftSphereEnv, SoftSphereVectorEnv
 from .world import World
 
+WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
+
 
 def build_contact(world: World) -> TongueContact:
     """The scene's blade-tongue contact law."""
     dev = world.config["device"]
-    return TongueContact(world.scene.tissue, world.scene.mesh, dev["max_normal_force"], dev["friction"])
+    return TongueContact(world.scene.tissue, world.scene.mesh, dev["max_normal_force"], dev["friction"],
+                         wall_stiffness=WALL_FACTOR * dev["coupling_stiffness"])
 
 
 def _check_laryngoscope(world: World) -> LaryngoscopeParams:
