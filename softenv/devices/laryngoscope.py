@@ -57,9 +57,10 @@ place in the plane (a grid 1 m apart, so no shapes of two devices ever meet): po
 the offset, which changes their rounding, so device 0 (at the origin) equals a single device bit for
 bit and the others agree to rounding (tested).
 
-Reproducibility. No contact state crosses a control period: at the start of each, the incisor shapes
-that touched during the last one are removed and added again (dropping pymunk's cached contact
-impulses), so a device rebuilt from :meth:`state` (pickle, deepcopy) continues bit for bit.
+Reproducibility. No contact state crosses a control period: at the start of each, a device whose
+blade touched the incisors during the last one has them removed and added again (dropping pymunk's
+cached contact impulses) and its blade's position-correction velocity cleared, so a device rebuilt
+from :meth:`state` (pickle, deepcopy, reset) continues bit for bit.
 """
 
 from __future__ import annotations
@@ -419,9 +420,13 @@ class _Space:
         self.flush(i)
 
     def flush(self, i: int) -> None:
-        """Drop pymunk's cached contacts of device ``i`` (remove and add its incisors again)."""
+        """Drop the contact state of device ``i`` that its pose and velocity do not show: pymunk's cached
+        contact impulses (remove and add its incisors again) and the blade's position-correction
+        velocity, which Chipmunk's solver leaves for the next step's position update (a position
+        update over zero time applies nothing and clears it)."""
         self.space.remove(self.incisors[i])
         self.space.add(self.incisors[i])
+        _lib.cpBodyUpdatePosition(self.blades[i]._body, 0.0)
 
 
 @dataclass

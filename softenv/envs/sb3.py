@@ -12,21 +12,26 @@ from typing import Any, Iterable, Sequence
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from .soft_sphere import SoftSphereVectorEnv
 
 
 class SoftSphereSB3VecEnv(VecEnv):
-    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", **scene)``: SB3's view of the batched twin."""
+    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", **scene)``: SB3's view of the batched twin
+    (of any SoftSphere id, the haptic ones included)."""
 
     def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0", **kwargs: Any) -> None:
         spec = gym.spec(env_id)
-        if spec.vector_entry_point != "softenv.envs.soft_sphere:SoftSphereVectorEnv":
+        entry = spec.vector_entry_point
+        if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
             raise ValueError(f"env_id={env_id!r} is not a SoftSphere id")
-        scene = {**spec.kwargs, **kwargs}
-        self.venv = SoftSphereVectorEnv(num_envs, max_episode_steps=spec.max_episode_steps, autoreset_mode="same_step",
-                                        **scene)
+        vector_env = load_env_creator(entry)
+        # the id's episode length, unless the caller sets task.horizon
+        steps = None if "horizon" in kwargs.get("task", {}) else spec.max_episode_steps
+        self.venv: SoftSphereVectorEnv = vector_env(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
+                                                    **{**spec.kwargs, **kwargs})
         self.env_id = env_id
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.render_mode = self.venv.render_mode
