@@ -24,6 +24,7 @@ saturated at its maximum force.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -57,8 +58,7 @@ class HapticLoop:
         dyn = self.world.config["dynamics"]
         self._dynamics = {"kind": dyn["kind"], "relaxed_fraction": dyn["relaxed_fraction"],
                           "time_constant": dyn["time_constant"]}
-        low, high = params.hand_box
-        self._low, self._high = np.array(low), np.array(high)
+        self._low, self._high = params.hand_box
         self.reset()
 
     def reset(self) -> None:
@@ -77,10 +77,16 @@ class HapticLoop:
     def tick(self, hand_pose: Any) -> np.ndarray:
         """Advance one period toward ``hand_pose`` (x, z, pitch, y); returns the force ``(3,)`` (N, world
         x, y, z) to render to the hand."""
-        target = check_array(hand_pose, "hand_pose", ndim=1, shape=(4,))
-        target = np.minimum(np.maximum(target, self._low), self._high)
-        velocity = ((target - self.hand_pose) / self.period).tolist()
-        self.device.substeps(velocity[0], velocity[1], velocity[2], velocity[3], self.device.n_substeps)
+        try:                                  # plain floats: a tick's budget has no room for array checks
+            pose = [float(v) for v in (hand_pose.tolist() if isinstance(hand_pose, np.ndarray) else hand_pose)]
+        except (TypeError, ValueError):
+            pose = []
+        if len(pose) != 4 or not all(map(math.isfinite, pose)):
+            check_array(hand_pose, "hand_pose", ndim=1, shape=(4,))         # names the problem
+            raise ValueError(f"hand_pose must be 4 finite numbers (x, z, pitch, y), got {hand_pose!r}")
+        now = self.device.hand_pose
+        v = [(min(max(p, lo), hi) - q) / self.period for p, lo, hi, q in zip(pose, self._low, self._high, now)]
+        self.device.substeps(v[0], v[1], v[2], v[3], self.device.n_substeps)
         self.time += self.period
         return self.device.haptic_force()[0]
 

@@ -21,6 +21,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "fit": ("softenv.bench.shape", "bench_fit"),
     "response": ("softenv.bench.response", "bench_response"),
     "env": ("softenv.bench.env", "bench_env"),
+    "haptic": ("softenv.bench.haptic", "bench_haptic"),
 }
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")

@@ -42,33 +42,40 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
     return rows
 
 
+def twin_step_timing(env_id: str, n: int, calls: int, actions: list[np.ndarray] | None = None) -> Timing:
+    """Seconds per step of ``env_id``'s batched twin with ``n`` envs (5 repeats of ``calls`` steps;
+    pre-sampled random actions unless given)."""
+    venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    actions = actions if actions is not None else [venv.action_space.sample() for _ in range(16)]
+    venv.step(actions[0])
+    samples = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for i in range(calls):
+            venv.step(actions[i % len(actions)])
+        samples.append((time.perf_counter() - t0) / calls)
+    venv.close()
+    return Timing(np.array(samples))
+
+
 def _vector_rows(quick: bool) -> list[Row]:
     rows = []
     n = 1024
     for env_id in ENV_SCENES:
-        venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
-        venv.reset(seed=0)
-        actions = [venv.action_space.sample() for _ in range(16)]
-        calls = 20 if quick else 100
-        samples = []
-        for _ in range(5):
-            t0 = time.perf_counter()
-            for i in range(calls):
-                venv.step(actions[i % 16])
-            samples.append((time.perf_counter() - t0) / calls)
-        t = Timing(np.array(samples))
+        t = twin_step_timing(env_id, n, 20 if quick else 100)
         rate = n / t.median
         is_target = env_id == "SoftSphere-v0"
         rows.append(Row("env", f"{env_id}: batched twin, {n} envs", rate, "env-steps/s",
                         f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}", ">= 1,000,000/s" if is_target else "",
                         rate >= 1e6 if is_target else None))
-        per_env = _state_bytes_per_env(env_id, n)
+        per_env = state_bytes_per_env(env_id, n)
         rows.append(Row("env", f"{env_id}: batched twin state per env (traced allocations, {n} envs)",
                         per_env / 1e3, "KB", target="<= 200 KB", ok=per_env <= 200e3))
     return rows
 
 
-def _state_bytes_per_env(env_id: str, n: int) -> float:
+def state_bytes_per_env(env_id: str, n: int) -> float:
     """Memory the twin allocates per env beyond the shared scene: two sizes, differenced."""
     sizes = []
     for count in (n // 4, n):

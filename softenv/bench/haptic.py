@@ -1,0 +1,123 @@
+"""Benchmarks of the simulated laryngoscope: the 1 kHz haptic tick, the single env against real time
+and CartPole-v1, the batched twin's throughput and memory per env, and the stiff and extreme cases
+(substeps, worst incisor overlap, deepest penetration, energy without input)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import gymnasium as gym
+import numpy as np
+
+from ..envs import HAPTIC_SCENES
+from .env import state_bytes_per_env, twin_step_timing
+from .timing import Row, Timing, gym_step_timing, measure, measure_each, spread_us
+
+ENV_ID = "SoftSphereHaptic-v0"
+
+
+def press_actions(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Random actions that press rather than lift (``press >= 0``): the tongue in contact most of the time."""
+    a = rng.uniform(-1, 1, shape).astype(np.float32)
+    a[..., 1] = np.abs(a[..., 1])
+    return a
+
+
+def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
+    from ..haptics import HapticLoop          # imports pymunk: only when this section runs
+
+    rows: list[Row] = []
+    loop = HapticLoop()
+    start = loop.hand_pose
+    state = {"tick": 0}
+
+    def press_tick() -> None:                 # the hand presses 3 cm down over 1 s, then holds
+        state["tick"] += 1
+        loop.tick(start - [0.0, 0.03 * min(state["tick"], 1000) / 1000, 0.0, 0.0])
+
+    t = measure_each(press_tick, calls=5000 if quick else 20000)
+    rows.append(Row("haptic", "1 kHz haptic tick (HapticLoop.tick: physics substeps, tongue contact, force out)",
+                    t.p99 * 1e6, "us (p99)", f"median {t.median * 1e6:.1f} us, {loop.device.n_substeps} substeps",
+                    "p99 <= 100 us", t.p99 <= 100e-6))
+    cart = 1.0 / reference.median
+    dt = gym.make(ENV_ID).unwrapped.world.config["dynamics"]["dt"]
+    rng = np.random.default_rng(0)
+    steps = 1000 if quick else 5000
+    for label, actions in (("random actions", rng.uniform(-1, 1, (4096, 4)).astype(np.float32)),
+                           ("pressing actions", press_actions(rng, (4096, 4)))):
+        env = gym.make(ENV_ID)
+        t = gym_step_timing(env, list(actions), steps)
+        realtime = dt / t.median
+        rows.append(Row("haptic", f"{ENV_ID}: single env, simulated s per wall s ({label}, resets included)", realtime,
+                        "x real time", f"{1 / t.median:,.0f} steps/s = {1 / t.median / cart:.3f} x CartPole-v1; IQR "
+                        f"{dt / t.p75:.0f}-{dt / t.p25:.0f}x", ">= 100x", realtime >= 100))
+    env = gym.make(ENV_ID)
+    r = measure(lambda: env.reset(), number=50 if quick else 200, repeats=5)
+    rows.append(Row("haptic", f"{ENV_ID}: reset", r.median * 1e6, "us", spread_us(r)))
+    n = 1024
+    calls = 4 if quick else 12
+    for label, actions in (("random actions", None), ("pressing actions", list(press_actions(rng, (8, n, 4))))):
+        t = twin_step_timing(ENV_ID, n, calls, actions)
+        rate = n / t.median
+        rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs ({label})", rate, "env-steps/s",
+                        f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}", ">= 25,000/s", rate >= 25_000))
+    for env_id in HAPTIC_SCENES:
+        per_env = state_bytes_per_env(env_id, 256)
+        rows.append(Row("haptic", f"{env_id}: batched twin state per env (traced allocations, pymunk's C memory "
+                        "not included: 2 bodies, 2 shapes, 3 constraints)", per_env / 1e3, "KB",
+                        target="<= 200 KB", ok=per_env <= 200e3))
+    rows += extreme_rows(quick)
+    return rows
+
+
+EXTREMES: dict[str, dict] = {
+    "default scene": {},
+    "coupling 1e6 N/m, 10 g blade": {"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}},
+    "tongue E = 1 kPa (softer than in vivo)": {"tissue": {"E": 1e3}},
+    "tongue E = 10 MPa": {"tissue": {"E": 1e7}},
+    "coupling 1e6 N/m, 10 g blade, E = 10 MPa": {"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01,
+                                                            "handle_mass": 0.0}, "tissue": {"E": 1e7}},
+}
+PUSHES = {"into the incisors": [0.0, -1.0, 0.0, -1.0], "into the tongue": [1.0, 1.0, 1.0, 1.0]}
+
+
+def extreme_rows(quick: bool) -> list[Row]:
+    """The hand at full speed into the incisors or the tongue (a whole 5 s episode, or 0.5 s where a
+    control step takes thousands of substeps), then held still for 1 s: finite, no tunnelling,
+    energy not growing without input."""
+    from ..devices.laryngoscope import Laryngoscope, LaryngoscopeParams, ScalarOps, _nearest_point
+    from ..envs.config import scene_config
+    from ..envs.haptic import build_contact
+    from ..envs.world import World
+
+    rows = []
+    for name, sections in EXTREMES.items():
+        world = World(scene_config(HAPTIC_SCENES[ENV_ID], sections))
+        params, contact = LaryngoscopeParams.from_config(world.config), build_contact(world)
+        for push, action in PUSHES.items():
+            dev = Laryngoscope(params, contact)
+            steps = 250 if dev.n_substeps < 100 else 25
+            if quick:
+                steps = min(steps, 25)
+            incisor, shape = dev._space.incisors[0], list(dev._blade.shapes)[0]
+            overlap, depth, finite = 0.0, 0.0, True
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                dev.control_step(action)
+                overlap = max(overlap, incisor.radius - shape.point_query(incisor.offset).distance)
+                x, y, a = dev._kinematics()[:3]
+                depth = max(depth, dev.c.R - _nearest_point(x, y, math.cos(a), math.sin(a), dev.c, ScalarOps)[2])
+                finite &= all(math.isfinite(v) for v in dev._kinematics())
+            energy = [dev.energy()[0]]
+            for _ in range(50 if dev.n_substeps < 100 else 5):
+                dev.control_step([0.0, 0.0, 0.0, 0.0])
+                energy.append(dev.energy()[0])
+            growth = float(np.max(np.diff(energy))) / max(energy[0], 1e-300)
+            ok = finite and overlap < 1e-3 and depth < 0.83 * dev.c.R and growth <= 1e-9
+            rows.append(Row("haptic extremes", f"{name}, hand at full speed {push} for {steps * params.dt:.2f} s",
+                            dev.n_substeps, "substeps/step",
+                            f"incisor overlap {overlap * 1e3:.3f} mm, deepest {depth / dev.c.R:.3f} R, peak energy "
+                            f"step {growth:+.1e} x E0 when held, finite {finite}, {time.perf_counter() - t0:.1f} s",
+                            "finite, overlap < 1 mm, < 0.83 R, no energy growth", ok))
+    return rows
