@@ -12,7 +12,6 @@ import math
 from typing import Any
 
 import matplotlib
-import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -166,6 +165,14 @@ class SphereFigure:
             plt.close(self.figure)
 
 
+def capsule(a: np.ndarray, b: np.ndarray, radius: float, n: int = 12) -> np.ndarray:
+    """Outline ``(2 n + 2, 2)`` of a rounded bar from ``a`` to ``b``."""
+    angle = math.atan2(b[1] - a[1], b[0] - a[0])
+    ends = [(b, np.linspace(angle - math.pi / 2, angle + math.pi / 2, n + 1)),
+            (a, np.linspace(angle + math.pi / 2, angle + 3 * math.pi / 2, n + 1))]
+    return np.concatenate([c + radius * np.stack([np.cos(t), np.sin(t)], axis=1) for c, t in ends])
+
+
 def midline_profile(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """The surface's section by the sagittal plane ``y = 0``: ``(m, 2)`` points ``(x, z)`` ordered by
     angle (edges that cross the plane, cut by linear interpolation)."""
@@ -195,9 +202,8 @@ class SagittalPanel:
         self.ax.plot(radius * np.cos(theta), radius * np.sin(theta), ls="--", lw=0.6, color="0.6")
         self.tongue = self.ax.fill([0], [0], color="#e8909a", alpha=0.9, lw=0.8, ec="#6e0f26")[0]
         self.blade = self.ax.fill([0], [0], color="#9aa5b1", ec="#2f3b48", lw=1.0)[0]
-        self.incisor = matplotlib.patches.Circle((0, 0), 1.0, color="#fffbe6", ec="#8a7f50", lw=1.0)
-        self.ax.add_patch(self.incisor)
-        (self.handle,) = self.ax.plot([], [], color="#2f3b48", lw=2.5)
+        self.incisor = self.ax.fill([0], [0], color="#fffbe6", ec="#8a7f50", lw=1.0)[0]
+        (self.handle,) = self.ax.plot([], [], color="#2f3b48", lw=4.0, solid_capstyle="round")
         (self.hand,) = self.ax.plot([], [], "o", color="#19c37d", ms=6)
         self.arrow = self.ax.annotate("", xy=(0, 0), xytext=(0, 0),
                                       arrowprops={"arrowstyle": "-|>", "color": "#19c37d", "lw": 1.5})
@@ -210,11 +216,11 @@ class SagittalPanel:
         profile = midline_profile(points, self.triangles)
         self.tongue.set_xy(profile)
         self.blade.set_xy(device["outline"])
-        ix, iy, ir = device["incisor"]
-        self.incisor.center, self.incisor.radius = (ix, iy), ir
+        a, b, r = device["incisor"]
+        self.incisor.set_xy(capsule(np.asarray(a), np.asarray(b), r))
         gx, gy, _ = device["hand"]
-        heel = device["outline"][1]
-        self.handle.set_data([heel[0], gx], [heel[1], gy])
+        heel, top = device["handle"]
+        self.handle.set_data([heel[0], top[0]], [heel[1], top[1]])
         self.hand.set_data([gx], [gy])
         contact = device["contact"]
         if contact is not None and device["tongue_force"] > 0:

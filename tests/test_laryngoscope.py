@@ -9,8 +9,8 @@ import pymunk
 import pytest
 
 from softenv.devices.contact import TongueContact
-from softenv.devices.laryngoscope import (ACCURACY, Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams, ScalarOps,
-                                          _nearest_point, substep_count, virtual_coupling)
+from softenv.devices.laryngoscope import (ACCURACY, Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams, substep_count,
+                                          virtual_coupling)
 from softenv.devices.presets import PRESETS, render_force
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
@@ -29,11 +29,6 @@ def make_world(**sections) -> World:
 def make_device(**sections) -> Laryngoscope:
     world = make_world(**sections)
     return Laryngoscope(LaryngoscopeParams.from_config(world.config), build_contact(world))
-
-
-def penetration(dev: Laryngoscope) -> float:
-    x, y, a = dev._kinematics()[:3]
-    return dev.c.R - _nearest_point(x, y, math.cos(a), math.sin(a), dev.c, ScalarOps)[2]
 
 
 def coupling_pull(dev: Laryngoscope) -> np.ndarray:
@@ -57,7 +52,7 @@ def test_a_held_press_reaches_the_analytic_tissues_static_indentation(law):
     world = make_world(tissue={"law": law})
     R = world.scene.tissue.radius
     W = AnalyticTissue(world.scene.mesh, world.scene.tissue).amplitudes([[0.0, 0.0, R]], [[0.0, 0.0, -P]])["indentation"][0]
-    assert penetration(dev) == pytest.approx(W, rel=0.02)
+    assert dev.penetration() == pytest.approx(W, rel=0.02)
     # and that force is what the hand pushes with (statics: coupling and tongue balance)
     assert np.linalg.norm(coupling_pull(dev)) == pytest.approx(P, rel=0.02)
 
@@ -172,15 +167,14 @@ EXTREMES = {
 @pytest.mark.parametrize("action", [[0.0, -1.0, 0.0, -1.0], [1.0, 1.0, 1.0, 1.0]], ids=["into-incisors", "into-tongue"])
 def test_full_speed_into_teeth_or_tongue_stays_finite_and_never_tunnels(name, action):
     dev = make_device(**EXTREMES[name])
-    inc, shape = dev._space.incisors[0], list(dev._blade.shapes)[0]
     steps = 250 if dev.n_substeps < 100 else 12               # a whole episode, or 0.25 s at 2,000 substeps
     for _ in range(steps):
         dev.control_step(action)
         assert all(math.isfinite(v) for v in dev._kinematics()) and math.isfinite(dev.normal_force)
         # the incisors stay outside the blade (to pymunk's slop plus a fraction of a millimetre)
-        assert shape.point_query(inc.offset).distance > inc.radius - 1e-3
+        assert dev.incisor_clearance() > -1e-3
         # the blade never passes the tongue's saturation barrier (80 % of the radius)
-        assert penetration(dev) < 0.83 * dev.c.R
+        assert dev.penetration() < 0.83 * dev.c.R
 
 
 @pytest.mark.parametrize("name", ["default", "stiff coupling, 10 g blade"])

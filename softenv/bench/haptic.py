@@ -86,7 +86,7 @@ def extreme_rows(quick: bool) -> list[Row]:
     """The hand at full speed into the incisors or the tongue (a whole 5 s episode, or 0.5 s where a
     control step takes thousands of substeps), then held still for 1 s: finite, no tunnelling,
     energy not growing without input."""
-    from ..devices.laryngoscope import Laryngoscope, LaryngoscopeParams, ScalarOps, _nearest_point
+    from ..devices.laryngoscope import Laryngoscope, LaryngoscopeParams
     from ..envs.config import scene_config
     from ..envs.haptic import build_contact
     from ..envs.world import World
@@ -100,14 +100,12 @@ def extreme_rows(quick: bool) -> list[Row]:
             steps = 250 if dev.n_substeps < 100 else 25
             if quick:
                 steps = min(steps, 25)
-            incisor, shape = dev._space.incisors[0], list(dev._blade.shapes)[0]
             overlap, depth, finite = 0.0, 0.0, True
             t0 = time.perf_counter()
             for _ in range(steps):
                 dev.control_step(action)
-                overlap = max(overlap, incisor.radius - shape.point_query(incisor.offset).distance)
-                x, y, a = dev._kinematics()[:3]
-                depth = max(depth, dev.c.R - _nearest_point(x, y, math.cos(a), math.sin(a), dev.c, ScalarOps)[2])
+                overlap = max(overlap, -dev.incisor_clearance())
+                depth = max(depth, dev.penetration())
                 finite &= all(math.isfinite(v) for v in dev._kinematics())
             energy = [dev.energy()[0]]
             for _ in range(50 if dev.n_substeps < 100 else 5):

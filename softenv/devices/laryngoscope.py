@@ -26,7 +26,9 @@ Parts:
   orthogonal springs give the stiffness ``k`` in every direction (to second order in the
   separation over 1 m) and pymunk's implicit damping along both axes. Rotation: a
   ``DampedRotarySpring``.
-* **Upper incisors**: a static circle (4 mm) at the mouth, 3 mm above the flange in the start pose.
+* **Upper incisors**: a static rounded bar (radius 4 mm) at the mouth, 3 cm in from the heel, its
+  incisal edge 3 mm above the flange in the start pose, rising 3 cm up and back along the tooth and
+  the maxilla (so the blade cannot slip up past it).
   pymunk solves that contact; its force is ``|total_impulse| / h`` summed over the substeps of a
   control period and divided by the period (the mean incisor force).
 * **Tongue contact** (computed outside pymunk, applied each substep): the point of the blade's
@@ -84,12 +86,13 @@ GRID_SPACING = 1.0            # m between devices in a batch
 START_GAP = 0.005             # m between the blade's underside and the tongue at the start
 INCISOR_RADIUS = 0.004        # m
 INCISOR_CLEARANCE = 0.003     # m above the flange in the start pose
-INCISOR_SETBACK = 0.02        # m from the heel toward the tip
+INCISOR_SETBACK = 0.03        # m from the heel toward the tip
+INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
 COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
 SOLVER_ITERATIONS = 5         # pymunk's contact solver (default 10): one contact per blade, warm-started
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad) and scales of the observation (value / scale)
-HAND_REACH = {"insert": 0.10, "withdraw": 0.05, "up": 0.04}
+HAND_REACH = {"insert": 0.025, "withdraw": 0.05, "up": 0.04}   # further in, the handle would be in the mouth
 PITCH_LIMIT = 0.5
 POSITION_SCALE, ANGLE_SCALE, LATERAL_SCALE = 0.05, 0.5, 0.02
 SPEED_SCALE, SPIN_SCALE, LATERAL_SPEED_SCALE = 0.2, 2.0, 0.1
@@ -171,6 +174,10 @@ class LaryngoscopeParams:
         return self.body_point(0.0, self.grip_height)
 
     @property
+    def handle_top(self) -> tuple[float, float]:
+        return self.body_point(0.0, self.handle_length)
+
+    @property
     def outline(self) -> list[tuple[float, float]]:
         """The blade's side profile (convex, counter-clockwise), body frame."""
         L = self.blade_length
@@ -193,8 +200,16 @@ class LaryngoscopeParams:
 
     @property
     def incisor(self) -> tuple[float, float]:
+        """Centre of the incisal edge's rounding (local frame)."""
         hx, hy = self.heel_start
         return (hx - INCISOR_SETBACK, hy + self.flange_height + INCISOR_CLEARANCE + INCISOR_RADIUS)
+
+    @property
+    def incisor_segment(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """The upper incisors' static shape: a rounded bar (radius 4 mm) from the incisal edge up and
+        back along the tooth and the maxilla, so the blade cannot pass beside it."""
+        ix, iy = self.incisor
+        return (ix, iy), (ix + INCISOR_CROWN[0], iy + INCISOR_CROWN[1])
 
     @property
     def hand_box(self) -> tuple[tuple[float, float, float, float], tuple[float, float, float, float]]:
@@ -406,10 +421,12 @@ class _Space:
         for ox, oy in self.offsets.tolist():
             hand = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             blade = pymunk.Body(p.mass, p.moment)
+            # one shape a side, so one contact a device: with two, the solver's order of them would
+            # depend on the spatial index's history, and a rebuilt device would not continue bit for bit
             shape = pymunk.Poly(blade, p.outline)
             shape.collision_type, shape.friction, shape.elasticity = BLADE_TYPE, 0.3, 0.0
-            ix, iy = p.incisor
-            incisor = pymunk.Circle(self.space.static_body, INCISOR_RADIUS, (ox + ix, oy + iy))
+            (ax, ay), (bx, by) = p.incisor_segment
+            incisor = pymunk.Segment(self.space.static_body, (ox + ax, oy + ay), (ox + bx, oy + by), INCISOR_RADIUS)
             incisor.collision_type, incisor.friction, incisor.elasticity = INCISOR_TYPE, 0.3, 0.0
             self.space.add(hand, blade, shape, incisor, *virtual_coupling(hand, blade, p.grip, p))
             self.hands.append(hand)
@@ -523,7 +540,8 @@ class _DeviceBase:
         out = []
         for (x, y, a), (gx, gy, pitch), (P, Q, cx, cy, incisor, _) in zip(s.blade[:, :3], s.hand, s.contact):
             rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-            out.append({"outline": outline @ rot.T + (x, y), "incisor": (*p.incisor, INCISOR_RADIUS),
+            out.append({"outline": outline @ rot.T + (x, y), "incisor": (*p.incisor_segment, INCISOR_RADIUS),
+                        "handle": np.array([p.heel, p.handle_top]) @ rot.T + (x, y),
                         "hand": (gx, gy, pitch), "contact": (cx, cy) if P > 0 else None,
                         "tongue_force": float(math.hypot(P, Q)), "incisor_force": float(incisor),
                         "radius": p.radius})
@@ -681,6 +699,27 @@ class Laryngoscope(_DeviceBase):
     def haptic_force(self) -> np.ndarray:
         return np.array([self._rendered(ScalarOps)])
 
+    def incisor_clearance(self) -> float:
+        """Distance (m) between the incisors and the blade; negative: they overlap by that much."""
+        incisor, blade = self._space.incisors[0], next(iter(self._blade.shapes))
+        try:
+            touching = blade.shapes_collide(incisor).points
+        except AssertionError:                 # pymunk 7 asserts instead of returning no points
+            touching = []
+        if touching:
+            return min(point.distance for point in touching)
+        a, b = np.array(incisor.a), np.array(incisor.b)
+        corners = [np.array(blade.body.local_to_world(v)) for v in blade.get_vertices()]
+        ends = min(blade.point_query(tuple(a)).distance, blade.point_query(tuple(b)).distance)
+        t = [float(np.clip(np.dot(v - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)) for v in corners]
+        sides = min(float(np.linalg.norm(v - (a + u * (b - a)))) for v, u in zip(corners, t))
+        return min(ends, sides) - incisor.radius
+
+    def penetration(self) -> float:
+        """How deep (m) the blade's underside reaches into the undeformed tongue (negative: clear of it)."""
+        x, y, a = self._kinematics()[:3]
+        return self.c.R - _nearest_point(x, y, math.cos(a), math.sin(a), self.c, ScalarOps)[2]
+
     @property
     def hand_pose(self) -> tuple[float, float, float, float]:
         """The hand: grip x, z (m), pitch (rad), lateral y (m)."""
@@ -796,25 +835,24 @@ class LaryngoscopeBatch(_DeviceBase):
             blades[:, 3], blades[:, 4], blades[:, 5] = fx, fy, torque
             pymunk.batch.set_space_bodies(self.space, self._WRITE, self._write)
             self.space.step(h)
-            impulse += self._incisor_impulses()
+            self._add_incisor_impulses(impulse)
         self._lateral = np.stack([lat_y, lat_v, hand_lat, anchor], axis=1)
         self._hand_v = np.stack([hvx, hvy, hw, hl], axis=1)
         self._contact = np.stack([P, Q, cx, cy], axis=1)
         self._incisor = impulse / (count * h)
 
-    def _incisor_impulses(self) -> np.ndarray:
-        """``|total_impulse|`` of this substep's blade-incisor contacts, per device."""
+    def _add_incisor_impulses(self, impulse: np.ndarray) -> None:
+        """Add ``|total_impulse|`` of this substep's contacts with the incisors to each device's sum, one
+        contact after another in the solver's order (as the single device's callback adds them)."""
         self._arbiters.clear()
         pymunk.batch.get_space_arbiters(self.space, self._ARBITERS, self._arbiters)
-        out = np.zeros(self.n)
         ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uint64).reshape(-1, 2)
         if len(ids):
             j = np.frombuffer(self._arbiters.float_buf(), dtype=np.float64).reshape(-1, 2)
             blade = np.where(ids[:, 0] == self._static_id, ids[:, 1], ids[:, 0])   # the other body is static
             envs = self._id_order[np.searchsorted(self._sorted_ids, blade)]
-            out[envs] = np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1])
+            np.add.at(impulse, envs, np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1]))
             self._touched[envs] = True
-        return out
 
     def features(self) -> tuple[np.ndarray, np.ndarray]:
         """Force features ``(n, 4)`` of the contacts and a mask of the devices in contact."""

@@ -57,8 +57,9 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     | 2 | sweep: sideways, toward +y | ``max_sweep_speed`` = 0.1 m/s |
     | 3 | wrist pitch rate: counter-clockwise, tip down | ``max_pitch_rate`` = 1 rad/s |
 
-    The hand stops at the walls of its workspace (10 cm in, 5 cm out, 4 cm up, down to a level
-    blade at the tongue's centre, +-0.5 rad of pitch, +- the radius sideways). Actions outside
+    The hand stops at the walls of its workspace (2.5 cm in, beyond which the handle would enter the
+    mouth; 5 cm out; 4 cm up; down to a level blade at the tongue's centre; +-0.5 rad of pitch; +- the
+    radius sideways). Actions outside
     ``[-1, 1]``, non-finite, or of another shape raise ``ValueError`` and leave the env as it was.
 
     ## Observation Space

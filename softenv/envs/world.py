@@ -52,6 +52,9 @@ class World:
         self.device = IdealDevice(scene.workspace)        # the force-feature box in action units
         self.device_kind = config["device"]["kind"]
         self.device_obs_size = len(device_obs_names(self.device_kind))
+        self.k = scene.n_components
+        self.obs_size = 2 * self.k + self.device_obs_size + 4     # shapes, device state, previous action
+        self._device_end = 2 * self.k + self.device_obs_size
         self.dynamics = Dynamics(**config["dynamics"])
         task = config["task"]
         ranges = [task[key] for key in ("target_insertion_deg", "target_lateral_deg", "target_normal_force",
@@ -63,7 +66,6 @@ class World:
         self.tolerance = task["tolerance"]
         self.terminate_on_success = task["terminate_on_success"]
         self.weights = dict(config["reward"])
-        self.k = scene.n_components
         self.n_vertices = scene.mesh.n_vertices
         self.sqrt_variance = scene.sqrt_variance
         self.inv_sqrt = 1.0 / self.sqrt_variance
@@ -89,10 +91,6 @@ class World:
 
     # -- observations ---------------------------------------------------------------------------
 
-    @property
-    def obs_size(self) -> int:
-        """``2 k`` shape values, the device's state and the previous action (4)."""
-        return 2 * self.k + self.device_obs_size + 4
 
     def _observation_space(self) -> spaces.Space:
         b_low, b_high = self.scene.b_bounds
@@ -120,7 +118,7 @@ class World:
 
     def observe(self, b: np.ndarray, target_b: np.ndarray, device_state: Any, prev_action: Any) -> Any:
         """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
-        k, d = self.k, 2 * self.k + self.device_obs_size
+        k, d = self.k, self._device_end
         obs = np.empty(b.shape[:-1] + (self.obs_size,), np.float32)   # float64 values rounded on assignment
         obs[..., :k] = b * self.inv_sqrt
         obs[..., k:2 * k] = target_b * self.inv_sqrt
