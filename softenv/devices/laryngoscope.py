@@ -304,12 +304,14 @@ def _normal_force(blade: tuple, hand: tuple, cx: Any, cy: Any, dist: Any, touchi
 
     ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``. The
     law's stiffness up to ``K_ref`` is explicit; the excess ``K_ex`` (the steepest slope between here
-    and where this substep's approach speed would take the blade) is applied by backward Euler along
-    the normal, with the blade's effective mass there and the coupling's push predicted from the
-    current state: ``P (1 + K_ex h^2 / m) = P(delta) + (c + K_ex h) v + K_ex h^2 a``, where ``v`` is the
-    approach speed and ``a`` the coupling's acceleration of that point into the tongue. At rest
-    ``a = P / m``, so a held press settles exactly on the law, however stiff it is there; the
-    prediction uses forces of this instant (not the last contact force), so it adds no energy.
+    and where this substep's approach speed would take the blade), with a critical damper
+    ``c_ex = 2 sqrt(K_ex m)`` so that the stiff barrier does not ring, is applied by backward Euler
+    along the normal, with the blade's effective mass ``m`` there and the coupling's push predicted
+    from the current state: with ``s = K_ex h + c_ex``,
+    ``P (1 + s h / m) = P(delta) + (c + s) v + s h a``, where ``v`` is the approach speed and ``a`` the
+    coupling's acceleration of that point into the tongue. At rest ``a = P / m``, so a held press
+    settles exactly on the law, however stiff it is there; the prediction uses forces of this instant
+    (not the last contact force), so it does not feed energy back.
     """
     px, py, a, cos_a, sin_a, vx, vy, w = blade
     depth = c.R - dist
@@ -325,7 +327,9 @@ def _normal_force(blade: tuple, hand: tuple, cx: Any, cy: Any, dist: Any, touchi
     law = ops.take(loads, i) + (depth - i * c.step) * slope
     ahead = ops.take(slopes, ops.index(ops.positive(depth + c.h * approach) * c.inv_step, c.top))
     slope = ops.where(ahead > slope, ahead, slope)
-    stiff = ops.positive(slope - c.k_ref) * c.h
+    excess = ops.positive(slope - c.k_ref)
+    # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
+    stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
     # within the explicit range (stiff = 0) the prediction adds exactly 0: one env skips it
     push = 0.0 if ops is ScalarOps and stiff == 0.0 else _coupling_push(blade, hand, nx, ny, rn, c)
     beta = stiff * c.h * inv_meff
