@@ -6,6 +6,8 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECL
     os.environ.setdefault(_var, "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
 
 import pytest  # noqa: E402
@@ -24,3 +26,17 @@ except ImportError:  # pragma: no cover
 @pytest.fixture(scope="session")
 def cache_dir() -> str:
     return _CACHE
+
+
+HEAVY_MODULES = ("pymunk", "matplotlib", "torch", "scipy")
+
+
+@pytest.fixture(scope="session")
+def heavy_modules_after(cache_dir):
+    """Run Python ``code`` in a fresh interpreter (softenv not imported first); return which of
+    ``HEAVY_MODULES`` it loaded, sorted."""
+    def run(code: str) -> list[str]:
+        probe = f"\nimport sys\nprint(sorted(m for m in {HEAVY_MODULES!r} if m in sys.modules))\n"
+        out = subprocess.run([sys.executable, "-c", code + probe], capture_output=True, text=True, check=True)
+        return eval(out.stdout.strip().splitlines()[-1])
+    return run

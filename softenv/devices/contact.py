@@ -16,8 +16,9 @@ substep ``h`` is chosen for the stiffness ``K_ref`` at the design force (or wher
 if a soft tissue gets there first); the table's slope beyond it
 (the saturation barrier makes it grow without bound) is applied linearly implicitly (backward Euler
 along the contact normal with the blade's effective mass there, the other forces predicted by the
-last contact force), which is stable for any slope and exact at rest. The contact damper is explicit
-and kept below ``m_eff / h`` (half the stability limit ``2 m / h``).
+coupling's push), which is stable for any slope and exact at rest. The contact damper is explicit,
+critical for ``K_ref`` (tissue is viscous; lighter damping let a blade pressed hard into a soft
+tongue rock in a limit cycle), and kept below ``m_eff / h`` (half the stability limit ``2 m / h``).
 
 **Lateral law (the sweep).** While in contact the tongue's surface sticks to the blade: the sideways
 force is ``Q = k_t (y_blade - y_anchor)`` with the tissue's tangential stiffness

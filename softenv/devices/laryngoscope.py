@@ -90,6 +90,7 @@ INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
 COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
 SOLVER_ITERATIONS = 5         # pymunk's contact solver (default 10): one contact per blade, warm-started
+CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad) and scales of the observation (value / scale)
 HAND_REACH = {"insert": 0.025, "withdraw": 0.05, "up": 0.04}   # further in, the handle would be in the mouth
@@ -476,7 +477,7 @@ class DeviceState:
 
 def _constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -> _Constants:
     m_eff = p.effective_mass(p.reach())
-    damping = min(2.0 * 0.3 * math.sqrt(contact.reference_stiffness * m_eff), m_eff / h)
+    damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(contact.reference_stiffness * m_eff), m_eff / h)
     low, high = p.hand_box
     return _Constants(R=p.radius, h=h, inv_m=1.0 / p.mass, inv_I=1.0 / p.moment, h_over_m=h / p.mass,
                       k=p.coupling_stiffness, c=p.coupling_damping, k_t=contact.lateral_stiffness, mu=p.friction,
