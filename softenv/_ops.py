@@ -11,6 +11,7 @@ tests check).
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any
 
 import numpy as np
@@ -42,13 +43,7 @@ class ScalarOps:
         """``x`` (>= 0) truncated to an int, at most ``top``."""
         return int(x) if x < top else top
 
-    @staticmethod
-    def take(values: Any, i: int) -> float:
-        return values[i]
-
-    @staticmethod
-    def sign(x: float) -> float:
-        return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+    take = staticmethod(operator.getitem)          # values[i], without a Python frame
 
 
 class ArrayOps:
@@ -59,7 +54,6 @@ class ArrayOps:
     sin = staticmethod(np.sin)
     atan2 = staticmethod(np.arctan2)
     asin = staticmethod(np.arcsin)
-    sign = staticmethod(np.sign)
 
     @staticmethod
     def positive(x: np.ndarray) -> np.ndarray:

@@ -89,7 +89,7 @@ INCISOR_CLEARANCE = 0.003     # m above the flange in the start pose
 INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
 COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
-SOLVER_ITERATIONS = 5         # pymunk's contact solver (default 10): one contact per blade, warm-started
+SOLVER_ITERATIONS = 3         # pymunk's contact solver (default 10): one contact a blade, warm-started over 20+ substeps
 CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad) and scales of the observation (value / scale)
