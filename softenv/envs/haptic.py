@@ -70,7 +70,7 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     |---|---|---|
     | ``[0, k)`` | current shape parameters ``b / sqrt(lambda)`` | PCA standard deviations |
     | ``[k, 2k)`` | target ``b* / sqrt(lambda)`` for the next action | PCA standard deviations |
-    | ``[2k, 2k+15)`` | device: blade pose (x, z, pitch, lateral y) and velocity, hand pose (x, z, pitch, y), tongue normal and sideways force, incisor force | ``v / (1 + |v|)`` of ``v`` = value / scale (5 cm, 0.5 rad, 2 cm, 0.2 m/s, 2 rad/s, 0.1 m/s, ``max_normal_force``, ``max_sideways_force``): in (-1, 1) |
+    | ``[2k, 2k+15)`` | device: blade pose (x, z, pitch, lateral y) and velocity, hand pose (x, z, pitch, y), tongue normal and sideways force, incisor force | ``v / (1 + abs(v))`` of ``v`` = value / scale (5 cm, 0.5 rad, 2 cm, 0.2 m/s, 2 rad/s, 0.1 m/s, ``max_normal_force``, ``max_sideways_force``): in (-1, 1) |
     | ``[2k+15, 2k+19)`` | previous action | [-1, 1] |
 
     Poses are relative to the start pose; names in :data:`softenv.devices.LARYNGOSCOPE_OBS`.
