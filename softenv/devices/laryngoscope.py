@@ -847,8 +847,9 @@ class LaryngoscopeBatch(_DeviceBase):
         self._incisor = impulse / (count * h)
 
     def _add_incisor_impulses(self, impulse: np.ndarray) -> None:
-        """Add ``|total_impulse|`` of this substep's contacts with the incisors to each device's sum, one
-        contact after another in the solver's order (as the single device's callback adds them)."""
+        """Add ``|total_impulse|`` of this substep's contact with the incisors to each device's sum (one
+        shape a side, so at most one contact a device: one addition each, as the single device's
+        callback makes it)."""
         self._arbiters.clear()
         pymunk.batch.get_space_arbiters(self.space, self._ARBITERS, self._arbiters)
         ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uint64).reshape(-1, 2)
@@ -856,7 +857,7 @@ class LaryngoscopeBatch(_DeviceBase):
             j = np.frombuffer(self._arbiters.float_buf(), dtype=np.float64).reshape(-1, 2)
             blade = np.where(ids[:, 0] == self._static_id, ids[:, 1], ids[:, 0])   # the other body is static
             envs = self._id_order[np.searchsorted(self._sorted_ids, blade)]
-            np.add.at(impulse, envs, np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1]))
+            impulse[envs] += np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1])
             self._touched[envs] = True
 
     def features(self) -> tuple[np.ndarray, np.ndarray]:
