@@ -237,8 +237,9 @@ def test_bad_action_raises_and_leaves_the_state_unchanged(bad):
     assert same(env.step(a), twin.step(a))
 
 
-def test_bad_batched_action_names_the_env():
-    venv = gym.make_vec("SoftSphere-v0", num_envs=3, vectorization_mode="vector_entry_point")
+@pytest.mark.parametrize("env_id", ["SoftSphere-v0", "SoftSphereHaptic-v0"])
+def test_bad_batched_action_names_the_env(env_id):
+    venv = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point")
     venv.reset(seed=0)
     actions = np.zeros((3, 4), np.float32)
     actions[2, 1] = np.nan
