@@ -331,13 +331,26 @@ def _normal_force(blade: tuple, hand: tuple, cx: Any, cy: Any, dist: Any, touchi
     excess = ops.positive(slope - c.k_ref)
     # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
     stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
-    # within the explicit range (stiff = 0) the prediction adds exactly 0: one env skips it
-    push = 0.0 if ops is ScalarOps and stiff == 0.0 else _coupling_push(blade, hand, nx, ny, rn, c)
+    # within the explicit range (stiff = 0) the prediction adds exactly 0: skip it there
+    push = _coupling_push_where(stiff, blade, hand, nx, ny, rn, c, ops)
     beta = stiff * c.h * inv_meff
     P = ops.positive((law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)) * touching
     fx = P * nx
     fy = P * ny
     return fx, fy, rx * fy - ry * fx, P
+
+
+def _coupling_push_where(stiff: Any, blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants,
+                         ops: Any) -> Any:
+    """:func:`_coupling_push` where ``stiff > 0``, 0 elsewhere (where it is multiplied by 0 anyway)."""
+    if ops is ScalarOps:
+        return 0.0 if stiff == 0.0 else _coupling_push(blade, hand, nx, ny, rn, c)
+    rows = np.flatnonzero(stiff > 0.0)
+    push = np.zeros(len(stiff))
+    if len(rows):
+        push[rows] = _coupling_push(tuple(v[rows] for v in blade), tuple(v[rows] for v in hand), nx[rows], ny[rows],
+                                    rn[rows], c)
+    return push
 
 
 def _coupling_push(blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants) -> Any:
@@ -437,6 +450,8 @@ class _Space:
             self.hands.append(hand)
             self.blades.append(blade)
             self.incisors.append(incisor)
+        self._incisor_shapes = [shape._shape for shape in self.incisors]      # the C handles flush uses
+        self._blade_bodies = [body._body for body in self.blades]
 
     def place(self, i: int, blade_pose: tuple[float, float, float], blade_velocity: tuple[float, float, float],
               hand_pose: tuple[float, float, float]) -> None:
@@ -453,15 +468,18 @@ class _Space:
         hand.angular_velocity = 0.0
         self.flush(i)
 
-    def flush(self, i: int) -> None:
-        """Drop the contact state of device ``i`` that its pose and velocity do not show: pymunk's cached
-        contact impulses (remove and add its incisors again) and the blade's position-correction
-        velocity, which Chipmunk's solver leaves for the next step's position update (a position
-        update over zero time applies nothing and clears it)."""
+    def flush(self, *devices: int) -> None:
+        """Drop the contact state of these devices that their poses and velocities do not show: pymunk's
+        cached contact impulses (remove and add their incisors again) and the blades'
+        position-correction velocities, which Chipmunk's solver leaves for the next step's position
+        update (a position update over zero time applies nothing and clears them)."""
         # through the C API: pymunk's Python bookkeeping stays valid (the same shape goes straight back)
-        _lib.cpSpaceRemoveShape(self.space._space, self.incisors[i]._shape)
-        _lib.cpSpaceAddShape(self.space._space, self.incisors[i]._shape)
-        _lib.cpBodyUpdatePosition(self.blades[i]._body, 0.0)
+        space, remove, add, update = self.space._space, _lib.cpSpaceRemoveShape, _lib.cpSpaceAddShape, \
+            _lib.cpBodyUpdatePosition
+        for i in devices:
+            remove(space, self._incisor_shapes[i])
+            add(space, self._incisor_shapes[i])
+            update(self._blade_bodies[i], 0.0)
 
 
 @dataclass
@@ -811,8 +829,7 @@ class LaryngoscopeBatch(_DeviceBase):
         self.substeps(vX, vY, spin, v_lat, self.n_substeps)
 
     def substeps(self, vX: np.ndarray, vY: np.ndarray, spin: np.ndarray, v_lat: np.ndarray, count: int) -> None:
-        for i in np.flatnonzero(self._touched):
-            self._space.flush(int(i))
+        self._space.flush(*np.flatnonzero(self._touched).tolist())
         self._touched[:] = False
         c, h, out = self.c, self.h, self._out
         lo, hi = c.low, c.high
