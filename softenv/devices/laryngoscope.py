@@ -72,9 +72,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pymunk
-import pymunk.batch
-from pymunk._chipmunk import lib as _lib
+
+try:
+    import pymunk
+    import pymunk.batch
+    from pymunk._chipmunk import lib as _lib
+except ImportError as exc:  # pragma: no cover - the device extra is part of every test install
+    raise ImportError("the simulated laryngoscope needs pymunk >= 7: pip install 'softenv[device]'") from exc
 
 from .._ops import ArrayOps, ScalarOps
 from .contact import TongueContact
