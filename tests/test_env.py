@@ -59,11 +59,14 @@ def test_sb3_check_env_passes_without_warnings(env_id, obs_mode):
         sb3_check_env(env, warn=True)
 
 
-def test_default_scene_imports_neither_pymunk_matplotlib_nor_torch(heavy_modules_after):
-    code = ("import gymnasium as gym\n"
-            "env = gym.make('softenv:SoftSphere-v0')\n"     # also: make without importing softenv first
-            "env.reset(seed=0)\n"
-            "for _ in range(20): env.step(env.action_space.sample())\n")
+def test_ideal_scenes_import_neither_pymunk_matplotlib_nor_torch(heavy_modules_after):
+    code = "import gymnasium as gym\n"
+    for env_id in IDS:                                  # make without importing softenv first
+        code += (f"env = gym.make('softenv:{env_id}')\n"
+                 "env.reset(seed=0)\n"
+                 "for _ in range(20): env.step(env.action_space.sample())\n"
+                 f"venv = gym.make_vec('softenv:{env_id}', num_envs=2, vectorization_mode='vector_entry_point')\n"
+                 "venv.reset(seed=0); venv.step(venv.action_space.sample())\n")
     assert heavy_modules_after(code) == []
 
 
