@@ -30,10 +30,10 @@ from typing import Any
 import numpy as np
 
 from ._validation import check_array, check_real
-from .devices.laryngoscope import Laryngoscope, LaryngoscopeParams
+from .devices.laryngoscope import Laryngoscope
 from .envs import HAPTIC_SCENES
 from .envs.config import scene_config
-from .envs.haptic import build_contact
+from .envs.haptic import device_parts
 from .envs.parts import Dynamics
 from .envs.world import World
 
@@ -52,8 +52,9 @@ class HapticLoop:
             raise ValueError(f"env_id={env_id!r} is not a haptic id; choose one of {list(HAPTIC_SCENES)}")
         rate = check_real(rate, "rate", 1000.0, 1e5)
         self.world = World(scene_config(HAPTIC_SCENES[env_id], scene))
-        params = dataclasses.replace(LaryngoscopeParams.from_config(self.world.config), dt=1.0 / rate)
-        self.device = Laryngoscope(params, build_contact(self.world))
+        params, contact = device_parts(self.world)
+        params = dataclasses.replace(params, dt=1.0 / rate)
+        self.device = Laryngoscope(params, contact)
         self.period = 1.0 / rate
         dyn = self.world.config["dynamics"]
         self._dynamics = {"kind": dyn["kind"], "relaxed_fraction": dyn["relaxed_fraction"],

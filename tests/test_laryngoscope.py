@@ -14,7 +14,7 @@ from softenv.devices.laryngoscope import (ACCURACY, COLLISION_SLOP, Laryngoscope
 from softenv.devices.presets import PRESETS, render_force
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
-from softenv.envs.haptic import build_contact
+from softenv.envs.haptic import device_parts
 from softenv.envs.world import World
 from softenv.haptics import HapticLoop
 from softenv.tissue import AnalyticTissue
@@ -27,8 +27,7 @@ def make_world(**sections) -> World:
 
 
 def make_device(**sections) -> Laryngoscope:
-    world = make_world(**sections)
-    return Laryngoscope(LaryngoscopeParams.from_config(world.config), build_contact(world))
+    return Laryngoscope(*device_parts(make_world(**sections)))
 
 
 def coupling_pull(dev: Laryngoscope) -> np.ndarray:
@@ -201,8 +200,7 @@ def test_energy_never_grows_without_input(name, stir):
 def test_a_batch_equals_single_devices():
     """Device 0 of a batch (at the origin) equals a single device bit for bit; the others, whose
     positions carry their place's offset, agree to rounding."""
-    world = make_world()
-    params, contact = LaryngoscopeParams.from_config(world.config), build_contact(world)
+    params, contact = device_parts(make_world())
     batch = LaryngoscopeBatch(params, contact, 3)
     singles = [Laryngoscope(params, contact) for _ in range(3)]
     rng = np.random.default_rng(0)
@@ -254,7 +252,7 @@ def test_the_haptic_loop_renders_the_press_within_the_preset():
     assert surface.shape == loop.world.scene.mesh.vertices.shape
     assert surface[:, 2].max() < loop.world.scene.tissue.radius - 1e-3   # the dorsum is pressed down
     far = loop.tick(start + [1.0, 1.0, 0.0, 0.0])              # far outside: projected onto the workspace
-    assert np.isfinite(far).all() and loop.hand_pose[0] <= LaryngoscopeParams.from_config(loop.world.config).hand_box[1][0]
+    assert np.isfinite(far).all() and loop.hand_pose[0] <= loop.device.params.hand_box[1][0]
     with pytest.raises(ValueError, match="hand_pose"):
         loop.tick([np.nan, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="env_id"):

@@ -89,15 +89,14 @@ def extreme_rows(quick: bool) -> list[Row]:
     stiff barrier keeps a bounded ringing: peak energy within 0.1 % of its value at the hold; one held
     on the teeth is pushed out of their overlap by pymunk's contact, at most the incisor force times
     the collision slop)."""
-    from ..devices.laryngoscope import COLLISION_SLOP, Laryngoscope, LaryngoscopeParams
+    from ..devices.laryngoscope import COLLISION_SLOP, Laryngoscope
     from ..envs.config import scene_config
-    from ..envs.haptic import build_contact
+    from ..envs.haptic import device_parts
     from ..envs.world import World
 
     rows = []
     for name, sections in EXTREMES.items():
-        world = World(scene_config(HAPTIC_SCENES[ENV_ID], sections))
-        params, contact = LaryngoscopeParams.from_config(world.config), build_contact(world)
+        params, contact = device_parts(World(scene_config(HAPTIC_SCENES[ENV_ID], sections)))
         for push, action in PUSHES.items():
             dev = Laryngoscope(params, contact)
             steps = 250 if dev.n_substeps < 100 else 25

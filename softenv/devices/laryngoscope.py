@@ -68,7 +68,7 @@ from :meth:`state` (pickle, deepcopy, reset) continues bit for bit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -357,16 +357,22 @@ def _coupling_push_where(stiff: Any, blade: tuple, hand: tuple, nx: Any, ny: Any
     return push
 
 
-def _coupling_push(blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants) -> Any:
-    """Acceleration (m/s^2) into the tongue that the coupling's springs and dampers give the blade's
-    contact point now (normal ``(nx, ny)``, lever ``rn``)."""
+def _coupling_force(blade: tuple, hand: tuple, c: _Constants) -> tuple[Any, Any, Any]:
+    """The coupling's force ``(Fx, Fy)`` and torque on the blade now: the hand's springs at the grip
+    and the wrist spring, each with its damper (the hand feels the opposite)."""
     px, py, a, cos_a, sin_a, vx, vy, w = blade
     gx, gy, pitch, hvx, hvy, hw = hand
     qx = cos_a * c.grip[0] - sin_a * c.grip[1]
     qy = sin_a * c.grip[0] + cos_a * c.grip[1]
     Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
     Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
-    tau = qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
+    return Fx, Fy, qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
+
+
+def _coupling_push(blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants) -> Any:
+    """Acceleration (m/s^2) into the tongue that the coupling gives the blade's contact point now
+    (normal ``(nx, ny)``, lever ``rn``)."""
+    Fx, Fy, tau = _coupling_force(blade, hand, c)
     return -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
 
 
@@ -493,8 +499,8 @@ class DeviceState:
     blade: np.ndarray        # (n, 6) x, y, angle, vx, vy, spin (local frame)
     hand: np.ndarray         # (n, 3) grip x, y, pitch
     lateral: np.ndarray      # (n, 4) blade y, blade vy, hand y, anchor
-    contact: np.ndarray      # (n, 6) P, Q, contact x, contact y, incisor force, incisor touched (0/1)
-    extra: dict = field(default_factory=dict)
+    contact: np.ndarray      # (n, 5) P, Q, contact x, contact y, incisor force
+    hand_velocity: np.ndarray  # (n, 4) the hand's last velocities: x, y, pitch rate, lateral
 
 
 def _constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -> _Constants:
@@ -552,7 +558,7 @@ class _DeviceBase:
         bx, by = p.body_start
         gx, gy = p.grip_start
         return DeviceState(np.tile([bx, by, 0.0, 0.0, 0.0, 0.0], (n, 1)), np.tile([gx, gy, 0.0], (n, 1)),
-                           np.zeros((n, 4)), np.zeros((n, 6)))
+                           np.zeros((n, 4)), np.zeros((n, 5)), np.zeros((n, 4)))
 
     def blade_pose(self) -> np.ndarray:
         """``(n, 4)``: x, z (m), pitch (rad) of the blade's centre of mass and its lateral y (m)."""
@@ -565,7 +571,7 @@ class _DeviceBase:
         s, p = self.state(), self.params
         outline = np.array(p.outline)
         out = []
-        for (x, y, a), (gx, gy, pitch), (P, Q, cx, cy, incisor, _) in zip(s.blade[:, :3], s.hand, s.contact):
+        for (x, y, a), (gx, gy, pitch), (P, Q, cx, cy, incisor) in zip(s.blade[:, :3], s.hand, s.contact):
             rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
             out.append({"outline": outline @ rot.T + (x, y), "incisor": (*p.incisor_segment, INCISOR_RADIUS),
                         "handle": np.array([p.heel, p.handle_top]) @ rot.T + (x, y),
@@ -580,16 +586,13 @@ class _DeviceBase:
         return np.stack(self._rendered(ArrayOps), axis=-1)
 
     def _rendered(self, ops: Any) -> tuple[Any, Any, Any]:
-        p = self.params
-        x, y, a, vx, vy, w, gx, gy, _ = self._kinematics()
+        """The coupling's pull on the hand (world x, y, z), as the preset renders it."""
+        c = self.c
+        x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
         lat_y, lat_v, hand_lat, _ = self._lateral_state()
-        hvx, hvy, _, hl = self._hand_v_state()
-        qx, qy = p.grip
-        ca, sa = ops.cos(a), ops.sin(a)
-        rx, ry = ca * qx - sa * qy, sa * qx + ca * qy
-        k, c = p.coupling_stiffness, p.coupling_damping
-        return render_components(k * (x + rx - gx) + c * (vx - w * ry - hvx), k * (lat_y - hand_lat) + c * (lat_v - hl),
-                                 k * (y + ry - gy) + c * (vy + w * rx - hvy), k, p.haptic, ops)
+        hvx, hvy, hw, hl = self._hand_v_state()
+        Fx, Fy, _ = _coupling_force((x, y, a, ops.cos(a), ops.sin(a), vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), c)
+        return render_components(-Fx, c.k * (lat_y - hand_lat) + c.c * (lat_v - hl), -Fy, c.k, self.params.haptic, ops)
 
 
 class Laryngoscope(_DeviceBase):
@@ -772,17 +775,16 @@ class Laryngoscope(_DeviceBase):
         b, hd = self._blade, self._hand
         (px, py), (vx, vy), (gx, gy) = b.position, b.velocity, hd.position
         return DeviceState(np.array([[px, py, b.angle, vx, vy, b.angular_velocity]]), np.array([[gx, gy, hd.angle]]),
-                           np.array([self._lateral]),
-                           np.array([[*self._contact, self._incisor, float(self._touched)]]),
-                           {"hand_v": np.array([self._hand_v])})
+                           np.array([self._lateral]), np.array([[*self._contact, self._incisor]]),
+                           np.array([self._hand_v]))
 
     def load_state(self, s: DeviceState) -> None:
         self._space.place(0, tuple(s.blade[0, :3]), tuple(s.blade[0, 3:]), tuple(s.hand[0]))
         self._hand_pose = tuple(s.hand[0].tolist())
         self._lateral = tuple(s.lateral[0].tolist())
-        P, Q, cx, cy, incisor, touched = s.contact[0].tolist()
-        self._contact, self._incisor, self._touched = (P, Q, cx, cy), incisor, False
-        self._hand_v = tuple(s.extra.get("hand_v", np.zeros((1, 4)))[0].tolist())
+        P, Q, cx, cy, incisor = s.contact[0].tolist()
+        self._contact, self._incisor, self._touched = (P, Q, cx, cy), incisor, False     # place() flushed
+        self._hand_v = tuple(s.hand_velocity[0].tolist())
         self._impulse = 0.0
 
 
@@ -937,8 +939,7 @@ class LaryngoscopeBatch(_DeviceBase):
     def state(self) -> DeviceState:
         bodies = self._bodies()
         return DeviceState(bodies[:, 1].copy(), bodies[:, 0, :3].copy(), self._lateral.copy(),
-                           np.concatenate([self._contact, self._incisor[:, None], self._touched[:, None]], axis=1),
-                           {"hand_v": self._hand_v.copy()})
+                           np.concatenate([self._contact, self._incisor[:, None]], axis=1), self._hand_v.copy())
 
     def load_state(self, s: DeviceState, rows: np.ndarray | None = None) -> None:
         """Set the state of the devices in ``rows`` (all by default) from the matching rows of ``s``."""
@@ -949,5 +950,5 @@ class LaryngoscopeBatch(_DeviceBase):
         self._lateral[idx] = s.lateral[src]
         self._contact[idx] = s.contact[src, :4]
         self._incisor[idx] = s.contact[src, 4]
-        self._touched[idx] = False
-        self._hand_v[idx] = s.extra.get("hand_v", np.zeros((len(s.blade), 4)))[src]
+        self._touched[idx] = False                         # place() flushed them
+        self._hand_v[idx] = s.hand_velocity[src]

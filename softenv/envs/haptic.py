@@ -17,19 +17,15 @@ from .world import World
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 
 
-def build_contact(world: World) -> TongueContact:
-    """The scene's blade-tongue contact law."""
+def device_parts(world: World) -> tuple[LaryngoscopeParams, TongueContact]:
+    """The laryngoscope's parameters and contact law for a scene whose device is the laryngoscope."""
     dev = world.config["device"]
-    return TongueContact(world.scene.tissue, world.scene.mesh, dev["max_normal_force"], dev["friction"],
-                         wall_stiffness=WALL_FACTOR * dev["coupling_stiffness"])
-
-
-def _check_laryngoscope(world: World) -> LaryngoscopeParams:
-    kind = world.config["device"]["kind"]
-    if kind != "laryngoscope":
-        raise ValueError(f"device.kind={kind!r}: the SoftSphereHaptic envs drive the laryngoscope; "
+    if dev["kind"] != "laryngoscope":
+        raise ValueError(f"device.kind={dev['kind']!r}: the SoftSphereHaptic envs drive the laryngoscope; "
                          "use SoftSphere-v0 and its kin for the ideal device")
-    return LaryngoscopeParams.from_config(world.config)
+    contact = TongueContact(world.scene.tissue, world.scene.mesh, dev["max_normal_force"], dev["friction"],
+                            wall_stiffness=WALL_FACTOR * dev["coupling_stiffness"])
+    return LaryngoscopeParams.from_config(world.config), contact
 
 
 class SoftSphereHapticEnv(SoftSphereEnv):
@@ -130,7 +126,7 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     def __init__(self, render_mode: str | None = None, obs_mode: str = "vector",
                  base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
         super().__init__(render_mode, obs_mode, base_scene, **scene)
-        self.laryngoscope = Laryngoscope(_check_laryngoscope(self.world), build_contact(self.world))
+        self.laryngoscope = Laryngoscope(*device_parts(self.world))
         self._box = (self.world.scene.workspace.low, self.world.scene.workspace.high)
         self._rest = self.world.scene.rest_features.tolist()
 
@@ -170,7 +166,7 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     def __setstate__(self, state: dict[str, Any]) -> None:
         device_state = state.pop("laryngoscope")
         self.__dict__.update(state)
-        self.laryngoscope = Laryngoscope(LaryngoscopeParams.from_config(self.world.config), build_contact(self.world))
+        self.laryngoscope = Laryngoscope(*device_parts(self.world))
         self.laryngoscope.load_state(device_state)
 
 
@@ -194,7 +190,7 @@ class SoftSphereHapticVectorEnv(SoftSphereVectorEnv):
                  max_episode_steps: int | None = None, autoreset_mode: Any = "next_step",
                  base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
         super().__init__(num_envs, render_mode, obs_mode, max_episode_steps, autoreset_mode, base_scene, **scene)
-        self.laryngoscopes = LaryngoscopeBatch(_check_laryngoscope(self.world), build_contact(self.world), self.num_envs)
+        self.laryngoscopes = LaryngoscopeBatch(*device_parts(self.world), self.num_envs)
         self._start_state = self.laryngoscopes.start_state(self.num_envs)
 
     def _start_device(self, mask: np.ndarray) -> np.ndarray:
