@@ -21,6 +21,8 @@ import numpy as np
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 
+from softenv.parallel import Job, describe, run_jobs
+
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .evaluate import METRICS, SCENES, Episodes, evaluate, scene_kwargs
 from .policies import BASELINES, make_baseline
@@ -57,48 +59,92 @@ def check_names(plan: Plan) -> None:
             raise ValueError(f"unknown agent {name!r}; valid agents: {list(ALGOS)}")
 
 
-def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[[str], None] = print,
-        write: bool = True, stem: str = "benchmark") -> list[dict[str, Any]]:
-    """Evaluate the plan; print the table; write the reports when ``write``."""
-    check_names(plan)
-    import torch
-
-    torch.set_num_threads(1)
-    started = time.perf_counter()
-    summaries: list[dict[str, Any]] = []
-    timings: dict[str, float] = {}
+def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
+    """The plan's independent jobs: one per (scene, baseline) and per (scene, agent, training seed)."""
+    out = []
     for scene in plan.scenes:
-        env_id, kwargs = scene_kwargs(scene)
-        kwargs.pop("obs_mode")
-        world = World(make_config(**kwargs))
         for name in plan.baselines:
-            t0 = time.perf_counter()
-            policy = make_baseline(name, world)
-            episodes = evaluate(policy, scene, plan.episodes)
-            summaries.append(_with(episodes.summary(), kind="baseline", seeds=1))
-            timings[f"{scene} {name}"] = time.perf_counter() - t0
-            echo(_line(summaries[-1], time.perf_counter() - started))
+            out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents:
-            t0 = time.perf_counter()
-            pooled: list[Episodes] = []
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
-                budget = plan.timesteps.get(algo)
-                path = train_agent(algo, scene, seed, run_dir, budget, progress=False)
-                pooled.append(evaluate(load_agent(path, scene), scene, plan.episodes))
+                out.append(Job(f"{scene} {algo} seed {seed}", agent_job,
+                               (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes)))
+    return out
+
+
+def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
+    """Evaluate one baseline on one scene's test targets."""
+    _, kwargs = scene_kwargs(scene)
+    kwargs.pop("obs_mode")
+    return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes)
+
+
+def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
+              episodes: int) -> tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]:
+    """Train (or resume) one agent and evaluate it; also returns its learning curve (test-target
+    return against env steps), so the driver needs no access to the worker's files."""
+    _torch_single_thread()
+    path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
+    episodes_ = evaluate(load_agent(path, scene), scene, episodes)
+    log = Path(run_dir) / "eval" / "evaluations.npz"
+    curve = None
+    if log.exists():
+        with np.load(log, allow_pickle=False) as data:
+            curve = (data["timesteps"], data["results"].mean(axis=1))
+    return episodes_, curve
+
+
+def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[[str], None] = print,
+        write: bool = True, stem: str = "benchmark", executor: str = "local", n_jobs: int = 1,
+        retries: int = 1) -> list[dict[str, Any]]:
+    """Evaluate the plan over ``executor`` (see :mod:`softenv.parallel`); print the table; write the
+    reports when ``write``. Results do not depend on the executor or the number of workers."""
+    check_names(plan)
+    _torch_single_thread()
+    started = time.perf_counter()
+    grid = jobs(plan, runs_dir)
+    results = {r.key: r for r in run_jobs(grid, executor, n_jobs, retries, echo)}
+    summaries: list[dict[str, Any]] = []
+    timings: dict[str, float] = {}
+    curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+    failed = [r for r in results.values() if not r.ok]
+    for scene in plan.scenes:
+        env_id = scene_kwargs(scene)[0]
+        for name in plan.baselines:
+            r = results[f"{scene} {name}"]
+            timings[r.key] = r.wall_s
+            if r.ok:
+                summaries.append(_with(r.value.summary(), kind="baseline", seeds=1))
+        for algo in plan.agents:
+            runs = [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])]
+            timings[f"{scene} {algo}"] = sum(r.wall_s for r in runs)
+            done = [r.value for r in runs if r.ok]
+            if not done:
+                continue
+            curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
+            pooled = [e for e, _ in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in METRICS}
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
             budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
-            summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=plan.seeds[scene]))
-            timings[f"{scene} {algo}"] = time.perf_counter() - t0
-            echo(_line(summaries[-1], time.perf_counter() - started))
+            summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=len(done)))
     elapsed = time.perf_counter() - started
+    how = describe(executor, n_jobs)
     echo("")
     echo(format_table(summaries))
-    echo(f"\n{len(summaries)} policy x scene cells in {elapsed:.0f} s")
+    echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
-        write_reports(summaries, plan, out_dir, runs_dir, command, elapsed, timings, stem)
+        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem)
+    if failed:
+        raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
+                         + "; ".join(f"{r.key}: {r.error}" for r in failed))
     return summaries
+
+
+def _torch_single_thread() -> None:
+    import torch
+
+    torch.set_num_threads(1)
 
 
 def _with(summary: dict[str, Any], **extra: Any) -> dict[str, Any]:
@@ -110,11 +156,6 @@ def _fmt(m: dict[str, float], digits: int = 2) -> str:
     if not np.isfinite(m["mean"]):
         return "-"
     return f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, {m['ci_high']:.{digits}f}]"
-
-
-def _line(s: dict[str, Any], elapsed: float) -> str:
-    return (f"[{elapsed:6.0f} s] {s['scene']:38s} {s['policy']:14s} score {_fmt(s['normalized_score'], 1):22s} "
-            f"error {s['final_error_mm']['mean']:.3f} mm  success {s['success']['mean']:.2f}")
 
 
 HEADER = ["scene", "policy", "kind", "normalized score", "IQM score", "final error (mm)", "success rate",
@@ -148,10 +189,11 @@ def provenance(command: str) -> dict[str, Any]:
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
 
 
-def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir: Path, command: str,
-                  elapsed: float, timings: dict[str, float], stem: str = "benchmark") -> None:
+def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, command: str, elapsed: float,
+                  timings: dict[str, float], curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
+                  how: str, failed: list[Any], stem: str = "benchmark") -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    prov = provenance(command)
+    prov = {**provenance(command), "executor": how}
     with open(out_dir / f"{stem}.csv", "w", newline="") as fh:
         fh.write(f"# made by: {command} ({prov['date']}; softenv {prov['softenv']}, sb3 {prov['stable_baselines3']})\n")
         writer = csv.writer(fh)
@@ -160,12 +202,13 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, ru
         for s in summaries:
             writer.writerow([s["scene"], s["policy"], s["kind"], s["seeds"], s["episodes"], f"{s['decision_us']:.1f}"] +
                             [f"{s[m][q]:.6g}" for m in METRICS for q in ("mean", "ci_low", "ci_high", "iqm")])
-    (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries,
-                                                       "timings_s": timings}, indent=1, default=float))
+    (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
+                                                       "failed_jobs": {r.key: r.error for r in failed}},
+                                                      indent=1, default=float))
     budgets = {a: plan.timesteps.get(a) or {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes}
                for a in plan.agents}
     md = [f"# Benchmark: baselines and agents on SoftSphere\n",
-          f"Made by `{command}` in {elapsed / 60:.1f} min ({prov['date']}; {prov['machine']}, single-threaded torch "
+          f"Made by `{command}` in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
@@ -175,11 +218,14 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, ru
           format_table(summaries), "",
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times), "
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
+    if failed:
+        md += ["", "Failed jobs (missing from the table): " + "; ".join(f"{r.key}: {r.error}" for r in failed)]
     (out_dir / f"{stem}.md").write_text("\n".join(md) + "\n")
-    _plots(summaries, plan, out_dir, runs_dir, command, stem)
+    _plots(summaries, plan, out_dir, curves, command, stem)
 
 
-def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir: Path, command: str, stem: str) -> None:
+def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
+           curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str, stem: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -201,7 +247,7 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, runs_dir:
     fig.tight_layout()
     fig.savefig(out_dir / _error_plot_name(stem), dpi=120)
     plt.close(fig)
-    _learning_curves(plan, out_dir / f"{stem}_learning_curves.png", runs_dir, command, plt)
+    _learning_curves(plan, curves, out_dir / f"{stem}_learning_curves.png", command, plt)
     _gallery(out_dir / f"{stem}_gallery.png", command, plt)
 
 
@@ -209,20 +255,16 @@ def _error_plot_name(stem: str) -> str:
     return "policy_error_vs_runtime.png" if stem == "benchmark" else f"{stem}_error_vs_runtime.png"
 
 
-def _learning_curves(plan: Plan, path: Path, runs_dir: Path, command: str, plt: Any) -> None:
+def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], path: Path,
+                     command: str, plt: Any) -> None:
     fig, axes = plt.subplots(1, len(plan.scenes), figsize=(4.2 * len(plan.scenes), 3.4), squeeze=False)
     for ax, scene in zip(axes[0], plan.scenes):
         for algo in plan.agents:
-            curves = []
-            for seed in range(plan.seeds[scene]):
-                log = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}" / "eval" / "evaluations.npz"
-                if log.exists():
-                    with np.load(log, allow_pickle=False) as data:
-                        curves.append((data["timesteps"], data["results"].mean(axis=1)))
-            if not curves:
+            runs = curves.get((scene, algo), [])
+            if not runs:
                 continue
-            n = min(len(c[0]) for c in curves)
-            steps, values = curves[0][0][:n], np.stack([c[1][:n] for c in curves])
+            n = min(len(c[0]) for c in runs)
+            steps, values = runs[0][0][:n], np.stack([c[1][:n] for c in runs])
             mean = values.mean(axis=0)
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.zeros_like(mean)
             ax.plot(steps, mean, label=f"{algo} ({len(values)} seeds)")

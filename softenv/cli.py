@@ -125,7 +125,8 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
         print(f"softenv compare --quick: SoftSphere-v0 test targets, {plan.episodes} episodes per policy; agents "
               f"trained now for {plan.timesteps} env steps (1 seed) -- short budgets, not the full benchmark")
     benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv),
-                  stem="benchmark_quick" if args.quick else "benchmark")
+                  stem="benchmark_quick" if args.quick else "benchmark", executor=args.executor, n_jobs=args.jobs,
+                  retries=args.retries)
 
 
 def cmd_score(args: argparse.Namespace) -> None:
@@ -191,6 +192,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, help="test episodes per policy and scene (default 100)")
     p.add_argument("--out", default="results", help="report directory (default: results)")
     p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="worker processes (local) or CPUs of a new local Ray instance (default 1: in this process)")
+    p.add_argument("--executor", choices=["local", "ray"], default="local",
+                   help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
+    p.add_argument("--retries", type=int, default=1, help="re-runs of a failed job before it is reported (default 1)")
 
     p = sub.add_parser("score", help="score a recorded trainee trajectory (CSV or NPZ) against the expert")
     p.add_argument("trajectory", help="file with columns time_s, insertion_deg, lateral_deg, normal_N, sideways_N")

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from ..parallel import THREAD_VARS
 from .timing import Row, blas_advice, cartpole_steps_per_second, machine_info
 
 # section name -> (module, function); each function takes ``(quick, reference)`` -- the CartPole-v1
@@ -24,7 +25,6 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
 }
 
-THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 
 
 def single_thread_environment() -> dict[str, str]:

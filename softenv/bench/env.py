@@ -38,6 +38,7 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
         r = measure(lambda: env.reset(), number=200 if quick else 1000, repeats=5)
         rows.append(Row("env", f"{env_id}: reset", r.median * 1e6, "us", spread_us(r)))
     rows += _vector_rows(quick)
+    rows += _sb3_rows(quick)
     rows += _render_rows(quick)
     return rows
 
@@ -72,6 +73,41 @@ def _vector_rows(quick: bool) -> list[Row]:
         per_env = state_bytes_per_env(env_id, n)
         rows.append(Row("env", f"{env_id}: batched twin state per env (traced allocations, {n} envs)",
                         per_env / 1e3, "KB", target="<= 200 KB", ok=per_env <= 200e3))
+    return rows
+
+
+def _sb3_rows(quick: bool) -> list[Row]:
+    """The SB3 adapter against the twin it wraps (same-step autoreset, as the adapter runs it), repeats
+    interleaved so that both see the same machine load; the ratio is of the medians."""
+    try:
+        from ..envs.sb3 import SoftSphereSB3VecEnv
+    except ImportError as exc:
+        return [Row("env", f"SB3 adapter: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
+    rows = []
+    calls = 50 if quick else 200         # 200 steps cross two episode ends (horizon 100): autoresets included
+    for n in (256, 1024):
+        twin = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                            autoreset_mode="same_step")
+        adapter = SoftSphereSB3VecEnv(n, "SoftSphere-v0")
+        twin.reset(seed=0)
+        adapter.seed(0)
+        adapter.reset()
+        actions = [twin.action_space.sample() for _ in range(16)]
+        samples: dict[str, list[float]] = {"twin": [], "adapter": []}
+        for _ in range(7):
+            for name, step in (("twin", twin.step), ("adapter", adapter.step)):
+                t0 = time.perf_counter()
+                for i in range(calls):
+                    step(actions[i % 16])
+                samples[name].append((time.perf_counter() - t0) / calls)
+        twin_t, adapter_t = Timing(np.array(samples["twin"])), Timing(np.array(samples["adapter"]))
+        ratio = adapter_t.median / twin_t.median
+        spread = np.array(samples["adapter"]) / np.array(samples["twin"])
+        rows.append(Row("env", f"SoftSphere-v0: SB3 adapter (SoftSphereSB3VecEnv) over its twin, {n} envs", ratio,
+                        "x the twin's time", f"adapter {n / adapter_t.median:,.0f} vs twin {n / twin_t.median:,.0f} "
+                        f"env-steps/s; paired ratios {spread.min():.2f}-{spread.max():.2f}", "<= 1.3x", ratio <= 1.3))
+        adapter.close()
+        twin.close()
     return rows
 
 

@@ -1,0 +1,199 @@
+"""One way to fan out independent work: a list of :class:`Job` run in this process, over local worker
+processes, or as Ray tasks on a cluster, with retries, progress and results in the jobs' order.
+
+Every job must be a module-level function of picklable arguments whose result depends on its
+arguments only (seeded from its key, never from run order), so that every executor gives the same
+result bit for bit. Workers run BLAS, OpenMP and torch on one thread each: ``n`` workers use ``n``
+cores and never oversubscribe them.
+
+* ``executor="local"``: ``jobs=1`` runs in this process, one job after another; ``jobs=N`` starts N
+  worker processes (``spawn``, so nothing of the parent's threads or locks is inherited).
+* ``executor="ray"`` (``pip install 'softenv[ray]'``): ``ray.init()`` attaches to the cluster that
+  ``RAY_ADDRESS`` names, or starts a local one with ``jobs`` CPUs. Each job is a Ray task of one
+  CPU; the driver receives every result, so no shared file system is needed.
+
+A job that raises is retried ``retries`` times, then reported as failed (:attr:`JobResult.error`),
+never fatal to the others.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+EXECUTORS = ("local", "ray")
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+
+
+@dataclass(frozen=True)
+class Job:
+    """``fn(*args)`` under a unique, stable ``key`` (its name in progress lines and reports)."""
+
+    key: str
+    fn: Callable[..., Any]
+    args: tuple = ()
+
+
+@dataclass
+class JobResult:
+    key: str
+    value: Any = None
+    error: str | None = None           # "ExceptionType: message" of the last attempt; None when it succeeded
+    attempts: int = 1
+    wall_s: float = 0.0                 # the successful (or last) attempt's run time in its worker
+    traceback: str = ""                 # of the last failed attempt
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def describe(executor: str, jobs: int) -> str:
+    """How a run fans out, in words for reports."""
+    if executor == "ray":
+        where = os.environ.get("RAY_ADDRESS")
+        return f"Ray tasks ({'cluster ' + where if where else f'local Ray, {jobs} CPUs'})"
+    return "one process, jobs in sequence" if jobs == 1 else f"{jobs} local worker processes"
+
+
+def run_jobs(jobs: Sequence[Job], executor: str = "local", n_jobs: int = 1, retries: int = 1,
+             echo: Callable[[str], None] | None = print) -> list[JobResult]:
+    """Run ``jobs``; return their results in the order given. ``echo`` gets one progress line per
+    finished job: jobs done / total, the job's time and the estimated time left."""
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor={executor!r}; choose from {list(EXECUTORS)}")
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or not 1 <= n_jobs <= 4096:
+        raise ValueError(f"jobs={n_jobs!r} must be an int in [1, 4096]")
+    if isinstance(retries, bool) or not isinstance(retries, int) or not 0 <= retries <= 100:
+        raise ValueError(f"retries={retries!r} must be an int in [0, 100]")
+    keys = [job.key for job in jobs]
+    if len(set(keys)) != len(keys):
+        raise ValueError("job keys must be unique; repeated: " + ", ".join(sorted({k for k in keys if keys.count(k) > 1})))
+    progress = _Progress(len(jobs), echo)
+    if executor == "ray":
+        return _run_ray(jobs, n_jobs, retries, progress)
+    if n_jobs == 1:
+        results = []
+        for job in jobs:
+            for attempt in range(1, retries + 2):
+                result = _attempt(job.key, job.fn, job.args)
+                result.attempts = attempt
+                if result.ok:
+                    break
+            results.append(progress.done(result))
+        return results
+    return _run_pool(jobs, n_jobs, retries, progress)
+
+
+def pin_threads() -> None:
+    """One BLAS/OpenMP/torch thread in this process (BLAS reads its variables when it loads, so they
+    are also set for the processes started from here)."""
+    os.environ.update({name: "1" for name in THREAD_VARS})
+    import sys
+
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+
+
+def _attempt(key: str, fn: Callable[..., Any], args: tuple) -> JobResult:
+    """Run one job, catching its failure (what a worker sends back)."""
+    pin_threads()
+    t0 = time.perf_counter()
+    try:
+        value = fn(*args)
+    except Exception as exc:  # a job's failure is data for the report, not the end of the grid
+        return JobResult(key, error=f"{type(exc).__name__}: {exc}", wall_s=time.perf_counter() - t0,
+                         traceback=traceback.format_exc())
+    return JobResult(key, value, wall_s=time.perf_counter() - t0)
+
+
+def _run_pool(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progress") -> list[JobResult]:
+    pin_threads()                      # inherited by the spawned workers before they load BLAS
+    results: list[JobResult | None] = [None] * len(jobs)
+    attempts = [0] * len(jobs)
+    with ProcessPoolExecutor(max_workers=min(n_jobs, max(len(jobs), 1)),
+                             mp_context=multiprocessing.get_context("spawn")) as pool:
+        def submit(i: int) -> Future:
+            attempts[i] += 1
+            future = pool.submit(_attempt, jobs[i].key, jobs[i].fn, jobs[i].args)
+            pending[future] = i
+            return future
+
+        pending: dict[Future, int] = {}
+        for i in range(len(jobs)):
+            submit(i)
+        while pending:
+            finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for future in finished:
+                i = pending.pop(future)
+                exc = future.exception()
+                result = future.result() if exc is None else JobResult(jobs[i].key, error=f"worker died: {exc!r}")
+                if not result.ok and attempts[i] <= retries:
+                    submit(i)
+                    continue
+                result.attempts = attempts[i]
+                results[i] = progress.done(result)
+    return [r for r in results if r is not None]
+
+
+def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progress") -> list[JobResult]:
+    try:
+        import ray
+    except ImportError as exc:
+        raise ValueError(f"executor='ray' needs Ray: pip install 'softenv[ray]' ({exc})") from exc
+    started_here = not ray.is_initialized()
+    if started_here:
+        env = {"env_vars": {name: "1" for name in THREAD_VARS}}
+        local = {} if os.environ.get("RAY_ADDRESS") else {"num_cpus": n_jobs, "include_dashboard": False}
+        ray.init(runtime_env=env, log_to_driver=False, **local)
+    # _attempt catches the job's exception, so retry here on a failed result; Ray itself retries a task
+    # whose worker or node died (max_retries)
+    task = ray.remote(num_cpus=1, max_retries=retries)(_attempt)
+    results: list[JobResult | None] = [None] * len(jobs)
+    attempts = [0] * len(jobs)
+    pending: dict[Any, int] = {}
+
+    def submit(i: int) -> None:
+        attempts[i] += 1
+        pending[task.remote(jobs[i].key, jobs[i].fn, jobs[i].args)] = i
+
+    try:
+        for i in range(len(jobs)):
+            submit(i)
+        while pending:
+            finished, _ = ray.wait(list(pending), num_returns=1)
+            for ref in finished:
+                i = pending.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except Exception as exc:  # the task's worker or node was lost after Ray's own retries
+                    result = JobResult(jobs[i].key, error=f"Ray task lost: {type(exc).__name__}: {exc}")
+                if not result.ok and attempts[i] <= retries:
+                    submit(i)
+                    continue
+                result.attempts = attempts[i]
+                results[i] = progress.done(result)
+    finally:
+        if started_here:
+            ray.shutdown()
+    return [r for r in results if r is not None]
+
+
+class _Progress:
+    def __init__(self, total: int, echo: Callable[[str], None] | None) -> None:
+        self.total, self.count, self.echo = total, 0, echo
+        self.start = time.perf_counter()
+
+    def done(self, result: JobResult) -> JobResult:
+        self.count += 1
+        if self.echo is not None:
+            elapsed = time.perf_counter() - self.start
+            left = elapsed / self.count * (self.total - self.count)
+            status = f"{result.wall_s:.0f} s" if result.ok else f"FAILED after {result.attempts} attempts: {result.error}"
+            self.echo(f"[{self.count}/{self.total} jobs, {elapsed:.0f} s, ~{left:.0f} s left] {result.key}: {status}")
+        return result
