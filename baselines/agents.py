@@ -17,12 +17,13 @@ from .evaluate import scene_kwargs
 from .policies import SB3Policy
 
 HYPERPARAMS = Path(__file__).parent / "hyperparams"
-# name -> (SB3 class name, YAML file, observation mode)
-ALGOS: dict[str, tuple[str, str, str]] = {
-    "ppo": ("PPO", "ppo.yml", "vector"),
-    "sac": ("SAC", "sac.yml", "vector"),
-    "td3": ("TD3", "td3.yml", "vector"),
-    "sac-her": ("SAC", "her.yml", "dict"),
+# name -> (SB3 class name, YAML file); the observation mode and any scene settings come from the
+# YAML's env_kwargs, as rl-zoo3 reads them
+ALGOS: dict[str, tuple[str, str]] = {
+    "ppo": ("PPO", "ppo.yml"),
+    "sac": ("SAC", "sac.yml"),
+    "td3": ("TD3", "td3.yml"),
+    "sac-her": ("SAC", "her.yml"),
 }
 AGENT_FORMAT_VERSION = 1
 
@@ -51,9 +52,19 @@ def hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     return params
 
 
-def _layout(scene: str, obs_mode: str) -> dict[str, Any]:
-    env_id, kwargs = scene_kwargs(scene, obs_mode)
-    kwargs.pop("obs_mode")
+def agent_env_kwargs(algo: str, scene: str, split: str = "test") -> tuple[str, dict[str, Any]]:
+    """Env id and ``gym.make`` kwargs of ``algo`` on ``scene``: the scene's, then the YAML's
+    ``env_kwargs`` (``obs_mode``, scene sections merged key by key), on the ``split`` targets."""
+    env_id, kwargs = scene_kwargs(scene)
+    for key, value in hyperparams(algo, env_id).get("env_kwargs", {}).items():
+        kwargs[key] = {**kwargs.get(key, {}), **value} if isinstance(value, dict) else value
+    kwargs["task"] = {**kwargs.get("task", {}), "split": split}
+    return env_id, kwargs
+
+
+def _layout(algo: str, scene: str) -> dict[str, Any]:
+    kwargs = agent_env_kwargs(algo, scene)[1]
+    obs_mode = kwargs.pop("obs_mode")
     config = make_config(**kwargs)
     return {"scene": scene, "obs_mode": obs_mode,
             "scene_key": config_key(config, ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task"))}
@@ -64,8 +75,7 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
     from softenv.envs.sb3 import SoftSphereSB3VecEnv
 
-    env_id, kwargs = scene_kwargs(scene, ALGOS[algo][2])
-    kwargs["task"] = {**kwargs["task"], "split": split}
+    env_id, kwargs = agent_env_kwargs(algo, scene, split)
     return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, **kwargs))
 
 
@@ -81,6 +91,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     n_envs = int(params.pop("n_envs", 1))
     budget = int(timesteps if timesteps is not None else params.pop("n_timesteps"))
     params.pop("n_timesteps", None)
+    params.pop("env_kwargs", None)               # for the env (make_training_env), not the algorithm
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     final = out / "model.zip"
@@ -124,7 +135,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
                 reset_num_timesteps=False)
     model.save(final)
     meta = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-            **_layout(scene, ALGOS[algo][2])}
+            **_layout(algo, scene)}
     (out / "agent.json").write_text(json.dumps(meta, indent=2))
     env.close()
     eval_env.close()
@@ -146,7 +157,7 @@ def load_agent(path: str | Path, scene: str) -> SB3Policy:
     algo = meta.get("algo")
     if algo not in ALGOS:
         raise ValueError(f"{str(meta_path)!r}: unknown agent {algo!r}; valid agents: {list(ALGOS)}")
-    wanted = _layout(scene, ALGOS[algo][2])
+    wanted = _layout(algo, scene)
     for key in ("scene_key", "obs_mode"):
         if meta.get(key) != wanted[key]:
             raise ValueError(f"agent {str(path)!r} was trained for scene {meta.get('scene')!r} "
@@ -155,7 +166,7 @@ def load_agent(path: str | Path, scene: str) -> SB3Policy:
     env = make_training_env(algo, scene, 1, split="test") if algo == "sac-her" else None
     model = getattr(sb3, ALGOS[algo][0]).load(path, env=env, device="cpu")
     policy = SB3Policy(model, algo)
-    policy.obs_mode = ALGOS[algo][2]
+    policy.obs_mode = wanted["obs_mode"]
     return policy
 
 
