@@ -42,5 +42,14 @@ def register_envs() -> None:
                      kwargs={"base_scene": scene})
 
 
-__all__ = ["ENV_SCENES", "HAPTIC_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config",
+def __getattr__(name: str) -> Any:
+    # the wrappers load on first use, like the env modules (import softenv stays light)
+    if name == "NumpyInfo":
+        from .wrappers import NumpyInfo
+
+        return NumpyInfo
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config",
            "register_envs"]

@@ -19,6 +19,12 @@ from ..response import REGRESSORS
 from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
 
 
+class UnknownSectionError(TypeError, ValueError):
+    """A keyword that is no scene section. A ``TypeError`` of Python's usual form (``... got an unexpected
+    keyword argument 'x'``), which wrappers such as TorchRL's ``GymEnv`` test for before retrying without
+    the keyword; also a ``ValueError``, as every other bad setting."""
+
+
 @dataclass(frozen=True)
 class Field:
     """One configurable value: default, unit, allowed values (as text) and a checker."""
@@ -176,10 +182,9 @@ def default_config() -> dict[str, dict[str, Any]]:
 
 def make_config(base: dict[str, dict[str, Any]] | None = None, **overrides: Any) -> dict[str, dict[str, Any]]:
     """Merge ``overrides`` (section -> {key: value}) into ``base`` (default: the defaults) and validate."""
+    check_sections(overrides, "make_config()")
     config = copy.deepcopy(base) if base is not None else default_config()
     for section, values in overrides.items():
-        if section not in SCHEMA:
-            raise ValueError(f"unknown scene section {section!r}; valid sections: {list(SCHEMA)}")
         if not isinstance(values, dict):
             raise ValueError(f"scene section {section!r} must be a dict of settings, got {values!r}; "
                              f"valid keys: {_keys_help(section)}")
@@ -190,8 +195,19 @@ def make_config(base: dict[str, dict[str, Any]] | None = None, **overrides: Any)
     return validate_config(config)
 
 
-def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """An env's config: its registered scene overrides, then the caller's sections, merged key by key."""
+def check_sections(sections: dict[str, Any], caller: str) -> None:
+    """Raise :class:`UnknownSectionError` for the first keyword in ``sections`` that is no scene section."""
+    for section in sections:
+        if section not in SCHEMA:
+            raise UnknownSectionError(f"{caller} got an unexpected keyword argument {section!r}; valid scene "
+                                      f"sections: {list(SCHEMA)}")
+
+
+def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any],
+                 caller: str = "make_config()") -> dict[str, dict[str, Any]]:
+    """An env's config: its registered scene overrides, then the caller's sections, merged key by key.
+    ``caller`` names the constructor in the error for an unknown keyword."""
+    check_sections(sections, caller)
     return make_config(make_config(**(base_scene or {})), **sections)
 
 

@@ -127,7 +127,7 @@ class SoftSphereEnv(gym.Env):
     def __init__(self, render_mode: str | None = None, obs_mode: str = "vector",
                  base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
         check_render_mode(render_mode)
-        self.world = World(scene_config(base_scene, scene), obs_mode)
+        self.world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"]}
         self.render_mode = render_mode
         self.action_space = self.world.action_space
@@ -282,7 +282,7 @@ class SoftSphereVectorEnv(VectorEnv):
         check_render_mode(render_mode)
         if max_episode_steps is not None:
             scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
-        self.world = World(scene_config(base_scene, scene), obs_mode)
+        self.world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"],
                          "autoreset_mode": self.autoreset_mode}
