@@ -22,6 +22,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "fit": ("softenv.bench.shape", "bench_fit"),
     "response": ("softenv.bench.response", "bench_response"),
     "env": ("softenv.bench.env", "bench_env"),
+    "sb3": ("softenv.bench.env", "bench_sb3"),
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
 }
 

@@ -1,5 +1,6 @@
 """Benchmarks of the environments: single-env steps through ``gym.make`` against CartPole-v1, the
-batched twin's throughput and memory per env, reset cost, scene build, table error, rendering."""
+batched twin's throughput and memory per env, reset cost, scene build, table error, rendering; and
+the SB3 adapter against the twin it wraps (section ``sb3``)."""
 
 from __future__ import annotations
 
@@ -38,7 +39,6 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
         r = measure(lambda: env.reset(), number=200 if quick else 1000, repeats=5)
         rows.append(Row("env", f"{env_id}: reset", r.median * 1e6, "us", spread_us(r)))
     rows += _vector_rows(quick)
-    rows += _sb3_rows(quick)
     rows += _render_rows(quick)
     return rows
 
@@ -76,13 +76,13 @@ def _vector_rows(quick: bool) -> list[Row]:
     return rows
 
 
-def _sb3_rows(quick: bool) -> list[Row]:
+def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
     """The SB3 adapter against the twin it wraps (same-step autoreset, as the adapter runs it), repeats
     interleaved so that both see the same machine load; the ratio is of the medians."""
     try:
         from ..envs.sb3 import SoftSphereSB3VecEnv
     except ImportError as exc:
-        return [Row("env", f"SB3 adapter: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
+        return [Row("sb3", f"SB3 adapter: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
     rows = []
     calls = 50 if quick else 200         # 200 steps cross two episode ends (horizon 100): autoresets included
     for n in (256, 1024):
@@ -103,7 +103,7 @@ def _sb3_rows(quick: bool) -> list[Row]:
         twin_t, adapter_t = Timing(np.array(samples["twin"])), Timing(np.array(samples["adapter"]))
         ratio = adapter_t.median / twin_t.median
         spread = np.array(samples["adapter"]) / np.array(samples["twin"])
-        rows.append(Row("env", f"SoftSphere-v0: SB3 adapter (SoftSphereSB3VecEnv) over its twin, {n} envs", ratio,
+        rows.append(Row("sb3", f"SoftSphere-v0: SB3 adapter (SoftSphereSB3VecEnv) over its twin, {n} envs", ratio,
                         "x the twin's time", f"adapter {n / adapter_t.median:,.0f} vs twin {n / twin_t.median:,.0f} "
                         f"env-steps/s; paired ratios {spread.min():.2f}-{spread.max():.2f}", "<= 1.3x", ratio <= 1.3))
         adapter.close()

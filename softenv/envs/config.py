@@ -199,8 +199,8 @@ def check_sections(sections: dict[str, Any], caller: str) -> None:
     """Raise :class:`UnknownSectionError` for the first keyword in ``sections`` that is no scene section."""
     for section in sections:
         if section not in SCHEMA:
-            raise UnknownSectionError(f"{caller} got an unexpected keyword argument {section!r}; valid scene "
-                                      f"sections: {list(SCHEMA)}")
+            raise UnknownSectionError(f"{caller} got an unexpected keyword argument {section!r} (not a scene section); "
+                                      f"valid sections: {list(SCHEMA)}")
 
 
 def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any],

@@ -324,12 +324,56 @@ class SoftSphereVectorEnv(VectorEnv):
         return self._observe(self._b, self._upcoming_target(), self._device_obs(), self._prev), {}
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            obs, reward, terminated, truncated, values, final_obs = self.step_values(actions)
+            done = terminated | truncated
+            _add_masked(infos, values, ~done)
+            if final_obs is not None:
+                final_info: dict[str, Any] = {}
+                _add_masked(final_info, values, done)
+                infos.update({"final_obs": final_obs, "_final_obs": done.copy(), "final_info": final_info,
+                              "_final_info": done.copy()})
+            return obs, reward, terminated, truncated, infos
+        a = self._checked(actions)
+        reset_now = self._autoreset.copy()
+        obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
+        if reset_now.any():               # next-step autoreset: these envs ignored their action and restart now
+            self._restart(reset_now)
+            obs = self._write_rows(obs, reset_now)
+        _add_masked(infos, values, ~reset_now)
+        self._autoreset = terminated | truncated
+        return obs, reward, terminated, truncated, infos
+
+    def step_values(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray],
+                                                 np.ndarray | None]:
+        """One step with same-step autoreset (the twin's ``autoreset_mode="same_step"``), for adapters that
+        format infos their own way: ``obs, reward, terminated, truncated, values, final_obs`` with
+        ``values`` the info terms of every env (unmasked arrays) and ``final_obs`` the ended envs' last
+        observations (an object array, ``None`` where an env goes on; ``None`` when none ended)."""
+        if self.autoreset_mode != AutoresetMode.SAME_STEP:
+            raise RuntimeError("step_values() needs autoreset_mode='same_step'")
+        a = self._checked(actions)
+        obs, reward, terminated, truncated, values = self._advance(a, np.ones(self.num_envs, dtype=bool))
+        done = terminated | truncated
+        if not done.any():
+            return obs, reward, terminated, truncated, values, None
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in np.flatnonzero(done):
+            final_obs[i] = _row(obs, i)
+        self._restart(done)
+        return self._write_rows(obs, done), reward, terminated, truncated, values, final_obs
+
+    def _checked(self, actions: Any) -> np.ndarray:
         if self._episode is None:
             raise RuntimeError("call reset() before step()")
-        a = _check_actions(actions, self.num_envs)
+        return _check_actions(actions, self.num_envs)
+
+    def _advance(self, a: np.ndarray, stepped: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                                                    dict[str, np.ndarray]]:
+        """Step the ``stepped`` envs with checked actions ``a`` and commit their state; the others keep
+        theirs (zero reward, no flags). Returns observations, rewards, flags and the info terms."""
         w = self.world
-        reset_now = self._autoreset.copy()
-        stepped = ~reset_now
         ep = self._episode
         T = ep.sq_ref.shape[1]
         rows = np.arange(self.num_envs)
@@ -371,27 +415,7 @@ class SoftSphereVectorEnv(VectorEnv):
         else:
             obs = self._observe(self._b, self._upcoming_target(), device_obs, self._prev)
         reward = np.where(s, reward, 0.0)
-        done = terminated | truncated
-        infos: dict[str, Any] = {}
-        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            if reset_now.any():
-                self._restart(reset_now)
-                obs = self._write_rows(obs, reset_now)
-            _add_masked(infos, info_values, s)
-            self._autoreset = done
-        else:
-            _add_masked(infos, info_values, s & ~done)
-            if done.any():
-                final_info: dict[str, Any] = {}
-                _add_masked(final_info, info_values, done)
-                final_obs = np.full(self.num_envs, None, dtype=object)
-                for i in np.flatnonzero(done):
-                    final_obs[i] = _row(obs, i)
-                infos.update({"final_obs": final_obs, "_final_obs": done.copy(), "final_info": final_info,
-                              "_final_info": done.copy()})
-                self._restart(done)
-                obs = self._write_rows(obs, done)
-        return obs, reward, terminated, truncated, infos
+        return obs, reward, terminated, truncated, info_values
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
         return self.world.compute_reward(achieved_goal, desired_goal, info)
