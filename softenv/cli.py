@@ -31,21 +31,31 @@ def _component_rule(text: str) -> int | float | str:
 
 
 def cmd_data(args: argparse.Namespace) -> None:
-    from ._progress import Progress
+    from .parallel import Job, run_jobs
+
+    jobs = [Job(f"{law} {n} points", _paper_data_job,
+                (n, args.deformations, args.magnitudes, law, args.noise, args.seed, args.out))
+            for law in args.laws for n in args.points]
+    results = run_jobs(jobs, "local", args.jobs, retries=0, echo=lambda line: print(line, file=sys.stderr))
+    print(f"{'data set':<34} {'rows':>5} {'coords':>7} {'noise (m)':>10}  file")
+    for r in results:
+        if not r.ok:
+            raise ValueError(f"{r.key}: {r.error}")
+        print(r.value)
+
+
+def _paper_data_job(n: int, deformations: int, magnitudes: int, law: str, noise: float, seed: int,
+                    out: str | None) -> str:
+    """One paper data set (built or read from the cache; copied to ``out``): its table row."""
     from .datasets import paper_dataset
 
-    jobs = [(n, law) for law in args.laws for n in args.points]
-    print(f"{'data set':<34} {'rows':>5} {'coords':>7} {'noise (m)':>10}  file")
-    with Progress(len(jobs), "data") as bar:
-        for n, law in jobs:
-            d = paper_dataset(n, args.deformations, args.magnitudes, law=law, noise=args.noise, seed=args.seed)
-            where = "(cache)"
-            if args.out is not None:
-                path = Path(args.out) / f"{d.name}.npz"
-                d.save(path)
-                where = str(path)
-            bar.advance(note=d.name)
-            print(f"{d.name:<34} {d.n_samples:>5} {d.shapes.shape[1]:>7} {d.noise_std:>10.2g}  {where}")
+    d = paper_dataset(n, deformations, magnitudes, law=law, noise=noise, seed=seed)
+    where = "(cache)"
+    if out is not None:
+        path = Path(out) / f"{d.name}.npz"
+        d.save(path)
+        where = str(path)
+    return f"{d.name:<34} {d.n_samples:>5} {d.shapes.shape[1]:>7} {d.noise_std:>10.2g}  {where}"
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
@@ -166,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("data", help="generate the paper's data sets (cached; --out writes copies)")
     paper_args(p, many=True)
     p.add_argument("--out", help="directory for .npz copies")
+    p.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1: in this process)")
 
     p = sub.add_parser("fit", help="fit a PCA shape model and report k, the rules' picks and the error")
     paper_args(p, many=False)

@@ -311,3 +311,17 @@ def test_ray_executor_retries_and_reports_failures(tmp_path):
     results = run_jobs(_jobs(tmp_path, "ray"), "ray", 2, retries=1, echo=None)
     assert [r.value for r in results if r.ok] == [9, 7, 16]
     assert results[1].attempts == 2 and not results[2].ok and results[2].attempts == 2
+
+
+def test_softenv_data_over_two_workers_writes_the_same_data_sets(tmp_path, capsys):
+    from softenv.cli import main
+    from softenv.datasets import ForceShapeData
+
+    args = ["data", "--points", "441", "--laws", "linear", "stiffening", "--magnitudes", "3"]
+    assert main([*args, "--out", str(tmp_path / "one")]) == 0
+    assert main([*args, "--jobs", "2", "--out", str(tmp_path / "two")]) == 0
+    assert "[2/2 jobs" in capsys.readouterr().err
+    for name in ("paper-441pts-10def-linear.npz", "paper-441pts-10def-stiffening.npz"):
+        one, two = ForceShapeData.load(tmp_path / "one" / name), ForceShapeData.load(tmp_path / "two" / name)
+        np.testing.assert_array_equal(one.shapes, two.shapes)
+        np.testing.assert_array_equal(one.forces, two.forces)
