@@ -13,7 +13,7 @@ import os
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, Callable
 
 import numpy as np
 
@@ -26,22 +26,37 @@ def save_artifact(path: str | os.PathLike, kind: str, version: int,
     path = Path(path)
     if path.suffix != ".npz":
         raise ValueError(f"path must end in .npz, got {str(path)!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
     header = dict(meta, kind=kind, format_version=int(version))
     payload = {name: np.asarray(a) for name, a in arrays.items()}
     for name, a in payload.items():
         if a.dtype.kind == "O":
             raise ValueError(f"artifact array {name!r} has dtype object, which cannot be saved without pickle")
     payload[_META_KEY] = np.array(json.dumps(header, sort_keys=True))
+    return atomic_write(path, lambda handle: np.savez(handle, **payload))
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], Any], text: bool = False) -> Path:
+    """Write a file through ``write(handle)`` into a temporary file beside ``path``, then rename it over
+    ``path``: a failed write leaves the old file (or none), never a short one. The file gets the mode
+    ``open()`` would give it (0666 less the umask), not ``mkstemp``'s 0600."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez(handle, **payload)
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "w" if text else "wb", **({"newline": ""} if text else {})) as handle:
+            write(handle)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)        # the only way to read it is to set it; put it straight back
+    os.umask(mask)
+    return mask
 
 
 def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

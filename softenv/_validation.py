@@ -86,6 +86,21 @@ def check_array(value: Any, name: str, *, ndim: int | tuple[int, ...] | None = N
     return out
 
 
+def real_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as an array of exactly ``shape`` with a real numeric dtype (int, uint or float; returned
+    as given, not converted): the one rule for actions and targets. Strings (numeric ones included),
+    bools, complex numbers, dicts and other objects are refused, never cast."""
+    try:
+        arr = value if type(value) is np.ndarray else np.asarray(value)
+    except (TypeError, ValueError) as exc:     # ragged nesting and the like
+        raise ValueError(f"{name} must be a real numeric array of shape {shape}, got {_show(value)} ({exc})") from None
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be a real numeric array of shape {shape}, got {_show(value)} (dtype {arr.dtype})")
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got shape {arr.shape}")
+    return arr
+
+
 def check_finite(arr: np.ndarray, name: str) -> None:
     """Raise if any entry is NaN or infinite, naming the first bad index and value.
 

@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
             cmd_compare(args, argv)
         elif args.command == "score":
             cmd_score(args)
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:        # bad arguments, files, or a file system that refuses
         print(f"softenv {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0

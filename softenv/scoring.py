@@ -6,14 +6,15 @@ Trajectory schema (CSV with a header row, or ``.npz`` with one array per column 
 
 | column | unit | allowed |
 |---|---|---|
-| ``time_s`` | s | finite, >= 0, strictly increasing |
+| ``time_s`` | s | finite, >= 0, strictly increasing, at most 600 (``MAX_DURATION_S``) |
 | ``insertion_deg`` | deg | within the scene's ``device.insertion_deg`` |
 | ``lateral_deg`` | deg | within +- ``device.lateral_deg`` |
 | ``normal_N`` | N | within [0, ``device.max_normal_force``] |
 | ``sideways_N`` | N | within +- ``device.max_sideways_force`` |
 
 Each row is a device command held until the next row (zero-order hold), sampled at the scene's
-control period ``dt``; the replay lasts until the last row's time. The target is the centre of the
+control period ``dt``; the replay lasts until the last row's time. Files over 64 MB are refused
+before they are read, and every check runs before the replay. The target is the centre of the
 scene's laryngoscopy family (the same for every trainee). Errors name the row (1 = first data row)
 and the column.
 
@@ -33,16 +34,21 @@ from __future__ import annotations
 import csv
 import json
 import math
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ._artifact import atomic_write
+from ._validation import check_choice, check_real
 from .envs.config import make_config
 
 COLUMNS = ("time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N")
 TRAJECTORY_VERSION = 1
+MAX_DURATION_S = 600.0          # ten minutes: any laryngoscopy attempt; longer logs are refused up front
+MAX_FILE_BYTES = 64 << 20
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
 FORMULA = ("score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness); accuracy = clip(1 - final_error / "
            "rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) (0 if never reached); safety = "
@@ -66,50 +72,102 @@ class Replay:
 
 
 def load_trajectory(path: str | Path) -> np.ndarray:
-    """Read and validate the schema; returns an ``(n, 5)`` float array in ``COLUMNS`` order."""
+    """Read and validate the schema; returns an ``(n, 5)`` float array in ``COLUMNS`` order. Every
+    problem is a ``ValueError`` naming the file (and the row and column where one applies)."""
     path = Path(path)
+    name = repr(str(path))
     if not path.exists():
-        raise ValueError(f"trajectory {str(path)!r} does not exist")
-    if path.suffix == ".npz":
-        with np.load(path, allow_pickle=False) as data:
-            version = int(data["format_version"]) if "format_version" in data else None
-            if version != TRAJECTORY_VERSION:
-                raise ValueError(f"{str(path)!r}: format_version={version!r}; this softenv reads {TRAJECTORY_VERSION}")
-            missing = [c for c in COLUMNS if c not in data]
-            if missing:
-                raise ValueError(f"{str(path)!r}: missing columns {missing}; required: {list(COLUMNS)}")
-            table = np.stack([np.asarray(data[c], dtype=np.float64).ravel() for c in COLUMNS], axis=1)
-    elif path.suffix == ".csv":
-        with open(path, newline="") as fh:
-            rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
-        if not rows:
-            raise ValueError(f"{str(path)!r} is empty; expected a header {list(COLUMNS)}")
-        header = [h.strip() for h in rows[0]]
-        missing = [c for c in COLUMNS if c not in header]
+        raise ValueError(f"trajectory {name} does not exist")
+    if not path.is_file():
+        raise ValueError(f"trajectory {name} is not a file")
+    if path.suffix not in (".npz", ".csv"):
+        raise ValueError(f"trajectory {name}: unknown format {path.suffix!r}; use .csv or .npz")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise ValueError(f"trajectory {name} has {path.stat().st_size:,} bytes; at most {MAX_FILE_BYTES:,} are read "
+                         f"(a {MAX_DURATION_S:g} s trajectory needs far less)")
+    try:
+        table = _read_npz(path, name) if path.suffix == ".npz" else _read_csv(path, name)
+    except (OSError, EOFError, zipfile.BadZipFile, UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"trajectory {name} cannot be read as {path.suffix[1:].upper()}: {exc}") from None
+    check_trajectory(table, f"trajectory {name}")
+    return table
+
+
+def _read_npz(path: Path, name: str) -> np.ndarray:
+    if not zipfile.is_zipfile(path):         # np.load would try it as a pickle and talk about that
+        raise ValueError(f"trajectory {name} cannot be read as NPZ: not a zip archive")
+    with np.load(path, allow_pickle=False) as data:
+        if "format_version" not in data:
+            raise ValueError(f"{name}: no format_version; this softenv reads format_version={TRAJECTORY_VERSION}")
+        try:
+            version = data["format_version"]
+        except ValueError as exc:
+            raise ValueError(f"{name}: format_version cannot be read without pickle: {exc}") from None
+        if version.shape != () or version.dtype.kind not in "iu" or int(version) != TRAJECTORY_VERSION:
+            raise ValueError(f"{name}: format_version={version.tolist()!r}; this softenv reads {TRAJECTORY_VERSION} "
+                             "(one integer)")
+        missing = [c for c in COLUMNS if c not in data]
         if missing:
-            raise ValueError(f"{str(path)!r}: missing columns {missing}; header has {header}, required {list(COLUMNS)}")
-        index = [header.index(c) for c in COLUMNS]
-        table = np.empty((len(rows) - 1, len(COLUMNS)))
-        for i, row in enumerate(rows[1:], start=1):
-            for j, (col, k) in enumerate(zip(COLUMNS, index)):
-                try:
-                    table[i - 1, j] = float(row[k])
-                except (ValueError, IndexError):
-                    raise ValueError(f"{str(path)!r}: row {i}, column {col!r}: {row[k] if k < len(row) else ''!r} "
-                                     "is not a number") from None
-    else:
-        raise ValueError(f"trajectory {str(path)!r}: unknown format {path.suffix!r}; use .csv or .npz")
+            raise ValueError(f"{name}: missing columns {missing}; required: {list(COLUMNS)}")
+        columns = {}
+        for c in COLUMNS:
+            try:
+                column = data[c]
+            except ValueError as exc:         # an object array (pickle) or a damaged member
+                raise ValueError(f"{name}: column {c!r} cannot be read without pickle: {exc}") from None
+            if column.ndim != 1 or column.dtype.kind not in "iuf":
+                raise ValueError(f"{name}: column {c!r} must be a 1-D array of real numbers, got shape "
+                                 f"{column.shape} and dtype {column.dtype}")
+            columns[c] = column
+    lengths = {c: len(v) for c, v in columns.items()}
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f"{name}: columns have unequal lengths {lengths}")
+    return np.stack([columns[c].astype(np.float64) for c in COLUMNS], axis=1)
+
+
+def _read_csv(path: Path, name: str) -> np.ndarray:
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
+    if not rows:
+        raise ValueError(f"{name} is empty; expected a header {list(COLUMNS)}")
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{name}: missing columns {missing}; header has {header}, required {list(COLUMNS)}")
+    index = [header.index(c) for c in COLUMNS]
+    table = np.empty((len(rows) - 1, len(COLUMNS)))
+    for i, row in enumerate(rows[1:], start=1):
+        for j, (col, k) in enumerate(zip(COLUMNS, index)):
+            try:
+                table[i - 1, j] = float(row[k])
+            except (ValueError, IndexError):
+                raise ValueError(f"{name}: row {i}, column {col!r}: {row[k] if k < len(row) else ''!r} "
+                                 "is not a number") from None
+    return table
+
+
+def check_trajectory(table: Any, source: str = "trajectory") -> np.ndarray:
+    """The schema's rules on an in-memory table: ``(n, 5)`` real numbers in ``COLUMNS`` order, at
+    least 2 rows, finite, times from 0 strictly increasing, lasting at most ``MAX_DURATION_S``."""
+    table = np.asarray(table)
+    if table.ndim != 2 or table.shape[1] != len(COLUMNS) or table.dtype.kind not in "iuf":
+        raise ValueError(f"{source} must be a table of real numbers with {len(COLUMNS)} columns {list(COLUMNS)}, got "
+                         f"shape {table.shape} and dtype {table.dtype}")
     if len(table) < 2:
-        raise ValueError(f"{str(path)!r}: needs at least 2 rows, has {len(table)}")
+        raise ValueError(f"{source}: needs at least 2 rows, has {len(table)}")
     bad = ~np.isfinite(table)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise ValueError(f"{str(path)!r}: row {i + 1}, column {COLUMNS[j]!r} = {table[i, j]!r} is not finite")
+        raise ValueError(f"{source}: row {i + 1}, column {COLUMNS[j]!r} = {table[i, j]!r} is not finite")
     t = table[:, 0]
     if t[0] < 0 or (np.diff(t) <= 0).any():
         i = 0 if t[0] < 0 else int(np.argmax(np.diff(t) <= 0)) + 1
-        raise ValueError(f"{str(path)!r}: row {i + 1}, column 'time_s' = {t[i]!r}: times must be >= 0 and strictly increasing")
-    return table
+        raise ValueError(f"{source}: row {i + 1}, column 'time_s' = {t[i]!r}: times must be >= 0 and strictly "
+                         "increasing")
+    if t[-1] > MAX_DURATION_S:
+        raise ValueError(f"{source}: row {len(t)}, column 'time_s' = {t[-1]:g}: a trajectory lasts at most "
+                         f"{MAX_DURATION_S:g} s")
+    return table.astype(np.float64, copy=False)
 
 
 def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") -> None:
@@ -134,6 +192,7 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
     from .envs.scene import degrees_to_features
     from .envs.soft_sphere import SoftSphereEnv
 
+    table = check_trajectory(table)
     config = make_config(**(scene or {}))
     check_ranges(table, config)
     dt = config["dynamics"]["dt"]
@@ -167,6 +226,8 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
     ``too_forceful``: the same path pressing to the device's maximum with a 3 Hz tremor.
     ``wrong_direction``: presses too shallow, off to the other side, and sweeps toward -y.
     """
+    check_real(duration_s, "duration_s", 0.1, MAX_DURATION_S)
+    check_choice(style, "style", ("expert", "too_forceful", "wrong_direction"))
     config = make_config(**(scene or {}))
     task, dev = config["task"], config["device"]
     target = np.array([np.mean(task["target_insertion_deg"]), np.mean(task["target_lateral_deg"]),
@@ -184,23 +245,24 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
     if style == "too_forceful":
         normal = np.minimum(dev["max_normal_force"] * ramp(0.2, 0.3) * (1.0 + 0.15 * np.sin(2 * np.pi * 3.0 * t)),
                             dev["max_normal_force"])
-    elif style not in ("expert", "wrong_direction"):
-        raise ValueError(f"style={style!r}; allowed: expert, too_forceful, wrong_direction")
     lateral = np.clip(lateral, -dev["lateral_deg"], dev["lateral_deg"])
     return np.stack([t, insertion, lateral, np.clip(normal, 0, dev["max_normal_force"]),
                      np.clip(sideways, -dev["max_sideways_force"], dev["max_sideways_force"])], axis=1)
 
 
 def save_trajectory(table: np.ndarray, path: str | Path, note: str = "") -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as fh:
+    """Write a trajectory as CSV (checked first; written atomically: a failed write leaves no short file)."""
+    table = check_trajectory(table)
+
+    def write(fh: Any) -> None:
         if note:
             fh.write(f"# {note}\n")
         writer = csv.writer(fh)
         writer.writerow(COLUMNS)
         for row in table:
             writer.writerow([f"{v:.6g}" for v in row])
+
+    atomic_write(path, write, text=True)
 
 
 def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float]:
@@ -216,9 +278,14 @@ def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float
 
 
 def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
-    """Score a trajectory file; with ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``."""
+    """Score a trajectory file; with ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``.
+    Arguments and file are checked before any replay."""
+    if out_dir is not None and Path(out_dir).exists() and not Path(out_dir).is_dir():
+        raise ValueError(f"out directory {str(out_dir)!r} exists and is not a directory")
     config = make_config(**(scene or {}))
-    trainee = replay(load_trajectory(path), scene)
+    table = load_trajectory(path)
+    check_ranges(table, config, f"trajectory {str(path)!r}")
+    trainee = replay(table, scene)
     expert = replay(expert_trajectory(scene), scene)
     parts = score(trainee, expert, config["reward"]["safe_force"])
     summary = {k: v for k, v in asdict(trainee).items() if not isinstance(v, np.ndarray)}
@@ -226,10 +293,9 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
               "expert": {k: v for k, v in asdict(expert).items() if not isinstance(v, np.ndarray)}, "formula": FORMULA}
     if out_dir is not None:
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
         stem = Path(path).stem
-        (out / f"{stem}_score.json").write_text(json.dumps(report, indent=2))
-        (out / f"{stem}_score.md").write_text(_markdown(report))
+        atomic_write(out / f"{stem}_score.json", lambda fh: fh.write(json.dumps(report, indent=2)), text=True)
+        atomic_write(out / f"{stem}_score.md", lambda fh: fh.write(_markdown(report)), text=True)
         _plot(trainee, expert, out / f"{stem}_score.png", f"{stem}: score {parts['score']:.0f}/100")
     return report
 
@@ -267,5 +333,5 @@ def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
     ax2.set_xlabel("time (s)")
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     plt.close(fig)

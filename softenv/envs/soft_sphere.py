@@ -13,6 +13,7 @@ from gymnasium.vector.utils import batch_space
 
 from .config import scene_config
 from .._ops import ArrayOps, ScalarOps
+from .._validation import real_array
 from .parts import reward_terms
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .world import World
@@ -139,8 +140,8 @@ class SoftSphereEnv(gym.Env):
     # -- gymnasium API --------------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        target = _target_option(self.world, options)     # check everything before the seed changes anything
         super().reset(seed=seed)
-        target = _target_option(self.world, options)
         ep = self.world.start_episodes([self.np_random], [target])
         self._target_features, self._target_b = ep.target_features[0], ep.target_b[0]
         self._targets = list(self._target_b)           # row views made once, not every step
@@ -316,8 +317,11 @@ class SoftSphereVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed has {len(seeds)} entries; num_envs={self.num_envs}")
-        self._rngs = [gym.utils.seeding.np_random(s)[0] for s in seeds]
+        # check everything before the generators change; a None seed continues that env's generator, as
+        # SyncVectorEnv's reset(seed=None) does
+        rngs = [rng if s is None else gym.utils.seeding.np_random(s)[0] for rng, s in zip(self._rngs, seeds)]
         target = _target_option(self.world, options)
+        self._rngs = rngs
         self._episode = self.world.start_episodes(self._rngs, [target] * self.num_envs)
         self._start(np.ones(self.num_envs, dtype=bool))
         self._autoreset[:] = False
@@ -500,10 +504,8 @@ class SoftSphereVectorEnv(VectorEnv):
 
 
 def _check_action_one(action: Any) -> list[float]:
-    a = action if isinstance(action, np.ndarray) else np.asarray(action, dtype=np.float64)
-    if a.shape != (4,):
-        raise ValueError(f"action must have shape (4,), got shape {a.shape}")
-    values = a.tolist()
+    a = real_array(action, "action", (4,))
+    values = a.tolist() if a.dtype.kind == "f" else [float(x) for x in a.tolist()]
     for i, x in enumerate(values):
         if not -1.0 <= x <= 1.0:          # also rejects NaN
             raise ValueError(f"action[{i}] = {x!r}: actions must be finite and within [-1, 1]")
@@ -511,9 +513,7 @@ def _check_action_one(action: Any) -> list[float]:
 
 
 def _check_actions(actions: Any, n: int) -> np.ndarray:
-    a = np.asarray(actions, dtype=np.float64)
-    if a.shape != (n, 4):
-        raise ValueError(f"actions must have shape ({n}, 4), got shape {a.shape}")
+    a = real_array(actions, "actions", (n, 4)).astype(np.float64, copy=False)
     bad = ~((a >= -1.0) & (a <= 1.0))
     if bad.any():
         i, j = np.argwhere(bad)[0]

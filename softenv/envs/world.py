@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from .._validation import real_array
 from ..response import TabulatedResponse
 from ..devices import device_obs_names
 from ..devices.ideal import IdealDevice
@@ -205,8 +206,8 @@ class World:
 
     def target_from_action(self, value: Any, name: str = "options['target']") -> np.ndarray:
         """Force features of a target given in action units (checked to lie in the target family)."""
-        a = np.asarray(value, dtype=np.float64)
-        if a.shape != (4,) or not np.isfinite(a).all():
+        a = real_array(value, name, (4,)).astype(np.float64)
+        if not np.isfinite(a).all():
             raise ValueError(f"{name} must be 4 finite numbers in action units [-1, 1], got {value!r}")
         f = self.device.features(a)
         tol = 1e-9 * (self.family.high - self.family.low + 1e-12)

@@ -1,0 +1,208 @@
+"""Bad input is refused whole: a clear ValueError, and nothing changed (issue: reliability)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import softenv  # noqa: F401
+
+BAD_TARGETS = [np.full(4, 2.0), np.zeros(4, complex), ["0.1"] * 4, {"a": 1}, np.zeros(3)]
+
+
+def _single():
+    return gym.make("SoftSphere-v0")
+
+
+def _batched():
+    return gym.make_vec("SoftSphere-v0", num_envs=3, vectorization_mode="vector_entry_point")
+
+
+@pytest.mark.parametrize("make", [_single, _batched], ids=["single", "batched"])
+@pytest.mark.parametrize("bad", BAD_TARGETS, ids=["out-of-range", "complex", "strings", "dict", "short"])
+def test_a_refused_reset_leaves_the_random_state_as_it_was(make, bad):
+    env, twin = make(), make()
+    env.reset(seed=1)
+    twin.reset(seed=1)
+    with pytest.raises(ValueError, match=r"options\['target'\]"):
+        env.reset(seed=7, options={"target": bad})
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])
+    a = np.full((3, 4) if make is _batched else 4, 0.25, np.float32)
+    np.testing.assert_array_equal(env.step(a)[0], twin.step(a)[0])
+
+
+def test_a_refused_reset_of_the_haptic_env_leaves_its_random_state():
+    env, twin = gym.make("SoftSphereHaptic-v0"), gym.make("SoftSphereHaptic-v0")
+    env.reset(seed=2)
+    twin.reset(seed=2)
+    with pytest.raises(ValueError):
+        env.reset(seed=9, options={"target": np.zeros(4, complex)})
+    np.testing.assert_array_equal(env.reset()[0], twin.reset()[0])
+
+
+BAD_ACTIONS = {
+    "numeric strings": ["0.1", "0.2", "0.3", "0.4"],
+    "complex": np.array([0.1, 0.2, 0.3, 0.4]) + 1j,
+    "object": np.array([0.1, 0.2, 0.3, 0.4], dtype=object),
+    "dict": {"a": 0.1},
+    "string": "0.1 0.2 0.3 0.4",
+    "bool": np.ones(4, bool),
+    "ragged": [[0.1, 0.2], [0.3]],
+}
+
+
+@pytest.mark.parametrize("bad", list(BAD_ACTIONS.values()), ids=list(BAD_ACTIONS))
+def test_single_and_batched_envs_refuse_the_same_action_types_with_a_value_error(bad):
+    env = _single()
+    env.reset(seed=0)
+    before = env.unwrapped._b.copy()
+    with pytest.raises(ValueError, match="action must be a real numeric array"):
+        env.step(bad)
+    np.testing.assert_array_equal(env.unwrapped._b, before)
+    venv = _batched()
+    venv.reset(seed=0)
+    batch = np.array([bad] * 3, dtype=object) if not isinstance(bad, (dict, str)) else bad
+    with pytest.raises(ValueError, match="actions must be"):
+        venv.step(batch)
+
+
+def test_integer_actions_are_real_numbers_and_step_like_floats():
+    env, twin = _single(), _single()
+    env.reset(seed=0)
+    twin.reset(seed=0)
+    out_int, out_float = env.step([0, 0, 1, 0]), twin.step([0.0, 0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(out_int[0], out_float[0])
+    assert out_int[1] == out_float[1] and type(out_int[1]) is float
+
+
+def test_an_unseeded_reset_continues_each_envs_generator_as_sync_vector_env_does():
+    twin = _batched()
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make("SoftSphere-v0") for _ in range(3)])
+    np.testing.assert_array_equal(twin.reset(seed=4)[0], sync.reset(seed=4)[0])
+    for _ in range(2):
+        np.testing.assert_array_equal(twin.reset()[0], sync.reset()[0])
+    np.testing.assert_array_equal(twin.reset(seed=[None, 8, None])[0], sync.reset(seed=[None, 8, None])[0])
+
+
+# -- trainee scoring: every bad file one line naming it, exit 2, before any heavy work ------------
+
+def _score(capsys, *args: str) -> tuple[int, str]:
+    from softenv.cli import main
+
+    code = main(["score", *args])
+    err = capsys.readouterr().err
+    return code, err
+
+
+def _npz(path, **columns):
+    np.savez(path, **columns)
+    return path
+
+
+GOOD_COLUMNS = {"time_s": np.array([0.0, 0.5, 1.0]), "insertion_deg": np.full(3, 90.0), "lateral_deg": np.zeros(3),
+                "normal_N": np.full(3, 20.0), "sideways_N": np.zeros(3)}
+
+
+def _bad_files(tmp_path):
+    full = _npz(tmp_path / "full.npz", format_version=np.array(1), **GOOD_COLUMNS)
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(full.read_bytes()[:200])
+    random_bytes = tmp_path / "random.npz"
+    random_bytes.write_bytes(np.random.default_rng(0).bytes(4000))
+    utf16 = tmp_path / "utf16.csv"
+    utf16.write_text("time_s,insertion_deg,lateral_deg,normal_N,sideways_N\n0,90,0,10,0\n1,90,0,10,0\n", encoding="utf-16")
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(bytes(range(256)) * 8)
+    long = tmp_path / "long.csv"
+    long.write_text("time_s,insertion_deg,lateral_deg,normal_N,sideways_N\n0,90,0,10,0\n1e7,90,0,10,0\n")
+    unequal = _npz(tmp_path / "unequal.npz", format_version=np.array(1), **{**GOOD_COLUMNS, "normal_N": np.zeros(2)})
+    version = _npz(tmp_path / "version.npz", format_version=np.array([1, 1]), **GOOD_COLUMNS)
+    directory = tmp_path / "adir.csv"
+    directory.mkdir()
+    return {"truncated npz": (truncated, "cannot be read as NPZ"), "random-bytes npz": (random_bytes, "cannot be read"),
+            "utf-16 csv": (utf16, "cannot be read as CSV"), "binary csv": (binary, "cannot be read as CSV"),
+            "1e7 s": (long, "row 2, column 'time_s' = 1e\\+07: a trajectory lasts at most 600 s"),
+            "unequal columns": (unequal, "unequal lengths"), "non-scalar version": (version, r"format_version=\[1, 1\]"),
+            "directory": (directory, "is not a file")}
+
+
+def test_score_reports_every_bad_file_in_one_line_naming_it(tmp_path, capsys):
+    import re
+
+    for case, (path, message) in _bad_files(tmp_path).items():
+        code, err = _score(capsys, str(path))
+        assert code == 2, case
+        assert err.count("\n") == 1 and "Traceback" not in err, (case, err)
+        assert str(path) in err and re.search(message, err), (case, err)
+
+
+def test_score_refuses_an_existing_file_as_out_before_any_work(tmp_path, capsys, monkeypatch):
+    import softenv.scoring as scoring
+
+    calls = []
+    monkeypatch.setattr(scoring, "replay", lambda *a, **k: calls.append(1))
+    taken = tmp_path / "taken"
+    taken.write_text("x")
+    code, err = _score(capsys, "examples/trajectories/expert.csv", "--out", str(taken))
+    assert code == 2 and "exists and is not a directory" in err and not calls
+
+
+def test_replay_and_expert_trajectory_validate_their_arguments():
+    from softenv.scoring import expert_trajectory, replay
+
+    good = expert_trajectory(duration_s=1.0)
+    for table, message in [(good[::-1], "strictly increasing"), (good[:0], "at least 2 rows"),
+                           (good[:, :4], "5 columns"), (good.astype(complex), "real numbers")]:
+        with pytest.raises(ValueError, match=message):
+            replay(table)
+    for duration in (0, -1, float("nan"), 1e9):
+        with pytest.raises(ValueError, match="duration_s"):
+            expert_trajectory(duration_s=duration)
+
+
+def test_save_trajectory_is_atomic_and_honours_the_umask(tmp_path, monkeypatch):
+    import csv as csv_module
+    import os
+
+    from softenv.scoring import load_trajectory, save_trajectory, expert_trajectory
+
+    path = tmp_path / "t.csv"
+    table = expert_trajectory(duration_s=1.0)
+    save_trajectory(table, path)
+    before = path.read_bytes()
+    old = os.umask(0o027)
+    try:
+        save_trajectory(table, tmp_path / "mode.csv")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "mode.csv").stat().st_mode & 0o777 == 0o640
+
+    class Broken:
+        def __init__(self, *args, **kwargs):
+            self.rows = 0
+
+        def writerow(self, row):
+            self.rows += 1
+            if self.rows > 10:
+                raise OSError("disk full")
+
+    monkeypatch.setattr(csv_module, "writer", lambda fh: Broken())
+    with pytest.raises(OSError, match="disk full"):
+        save_trajectory(table[::-1][::-1] * 1, path)
+    assert path.read_bytes() == before                       # the old file, whole
+    assert [p.name for p in tmp_path.iterdir() if p.suffix == ".tmp"] == []
+    np.testing.assert_allclose(load_trajectory(path), table, rtol=1e-5)
+
+
+def test_saved_artifacts_honour_the_umask(tmp_path):
+    import os
+
+    from softenv._artifact import save_artifact
+
+    old = os.umask(0o002)
+    try:
+        save_artifact(tmp_path / "a.npz", "test", 1, {"x": np.zeros(2)}, {})
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.npz").stat().st_mode & 0o777 == 0o664
