@@ -18,6 +18,7 @@ from typing import IO, Any, Callable
 import numpy as np
 
 _META_KEY = "__meta__"
+STAMP_MEMBER = "built_from.txt"     # a cache entry's digest (softenv._cache), not an array
 
 
 def save_artifact(path: str | os.PathLike, kind: str, version: int,
@@ -69,13 +70,22 @@ def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dic
             if _META_KEY not in data.files:
                 raise ValueError(f"{str(path)!r} is not a softenv artifact (no {_META_KEY!r} entry)")
             meta = json.loads(str(data[_META_KEY][()]))
-            arrays = {name: data[name] for name in data.files if name != _META_KEY}
+            arrays = {name: data[name] for name in data.files if name not in (_META_KEY, STAMP_MEMBER)}
     except (zipfile.BadZipFile, OSError, EOFError, json.JSONDecodeError, KeyError) as exc:
         raise ValueError(f"{str(path)!r} is corrupt or not an .npz artifact: {exc}") from exc
     except ValueError as exc:
         if "softenv artifact" in str(exc):
             raise
         raise ValueError(f"{str(path)!r} could not be read without pickle: {exc}") from exc
+    if not isinstance(meta, dict):
+        raise ValueError(f"{str(path)!r} has a header of type {type(meta).__name__}; expected a JSON object")
+    for name, a in arrays.items():            # every loader gets real, finite arrays or nothing
+        if a.dtype.kind not in "biuf":
+            raise ValueError(f"{str(path)!r}: array {name!r} has dtype {a.dtype}; expected real numbers")
+        if a.dtype.kind == "f" and not np.isfinite(a).all():
+            index = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+            raise ValueError(f"{str(path)!r}: array {name!r} has {float(a[index])!r} at index {index}; artifacts hold "
+                             "finite numbers only")
     found_kind, found_version = meta.get("kind"), meta.get("format_version")
     if found_kind != kind:
         raise ValueError(f"{str(path)!r} holds a {found_kind!r} artifact; expected {kind!r}")

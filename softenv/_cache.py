@@ -12,8 +12,11 @@ import hashlib
 import json
 import os
 import warnings
+import zipfile
 from pathlib import Path
 from typing import Any, Callable, TypeVar
+
+from ._artifact import STAMP_MEMBER as _STAMP
 
 T = TypeVar("T")
 
@@ -31,24 +34,54 @@ def cache_dir() -> Path:
 
 def cache_key(kind: str, params: dict[str, Any]) -> str:
     """A stable file stem for ``kind`` and ``params`` (JSON-serialisable)."""
+    return f"{kind}-{_digest(kind, params)[:20]}"
+
+
+def _digest(kind: str, params: dict[str, Any]) -> str:
+    """The full digest of everything an entry is built from (its file name holds the first 20 digits)."""
     text = json.dumps({"kind": kind, "physics": PHYSICS_VERSION, **params}, sort_keys=True, default=str)
-    return f"{kind}-{hashlib.sha256(text.encode()).hexdigest()[:20]}"
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
            load: Callable[[Path], T], save: Callable[[T, Path], Any], enabled: bool = True) -> T:
     """Return the cached artifact for ``(kind, params)``, building and saving it on a miss.
 
-    A corrupt or unreadable entry is rebuilt (with a warning), never trusted.
+    Every entry carries the full digest of what it was built from (a ``built_from`` member of its
+    ``.npz``) and is used only when that digest is the one asked for: a corrupt, unreadable, stale or
+    swapped-in entry (another scene's table, another tissue's shape model under this name) is rebuilt
+    with a warning, never trusted.
     """
     if not enabled:
         return build()
-    path = cache_dir() / f"{cache_key(kind, params)}.npz"
+    digest = _digest(kind, params)
+    path = cache_dir() / f"{kind}-{digest[:20]}.npz"
     if path.exists():
         try:
+            found = built_from(path)
+            if found != digest:
+                raise ValueError("it records no build digest (an older softenv made it)" if found is None else
+                                 f"it was built from config {found[:20]}..., not from this one ({digest[:20]}...)")
             return load(path)
-        except ValueError as exc:
+        except (ValueError, KeyError, TypeError, AttributeError, OSError, EOFError, zipfile.BadZipFile) as exc:
             warnings.warn(f"rebuilding unreadable cache entry {path}: {exc}", RuntimeWarning, stacklevel=2)
     value = build()
-    save(value, path)
+    # saved beside, stamped, then renamed: readers see a whole, stamped entry or none
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.building.npz")
+    try:
+        save(value, tmp)
+        with zipfile.ZipFile(tmp, "a") as archive:
+            archive.writestr(_STAMP, digest)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return value
+
+
+def built_from(path: Path) -> str | None:
+    """The digest a cache entry records, or None for a file without one."""
+    with zipfile.ZipFile(path) as archive:
+        try:
+            return archive.read(_STAMP).decode()
+        except KeyError:
+            return None

@@ -89,14 +89,15 @@ class ForceShapeData:
             mesh = mesh_from_spec(meta["mesh"])
             tissue = TissueParams(**meta["tissue"])
             layout = layout_from_dict(meta["layout"])
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"{str(path)!r} has an invalid header: {exc}") from exc
+            noise, seed, name = float(meta["noise"]), int(meta["seed"]), str(meta["name"])
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{str(path)!r} has an invalid header (missing or bad {exc})") from exc
         forces, shapes, ids = arrays["forces"], arrays["shapes"], arrays["contact_ids"]
         n = forces.shape[0]
         if forces.shape != (n, layout.n_features) or shapes.shape != (n, 3 * mesh.n_vertices) or ids.shape != (n,):
             raise ValueError(f"{str(path)!r} has inconsistent arrays: forces {forces.shape}, shapes {shapes.shape}, "
                              f"contact_ids {ids.shape} for a {layout.name!r} layout on {mesh.n_vertices} vertices")
-        return cls(forces, shapes, ids, mesh, tissue, layout, float(meta["noise"]), int(meta["seed"]), str(meta["name"]))
+        return cls(forces, shapes, ids, mesh, tissue, layout, noise, seed, name)
 
 
 def paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes: int = 11, *,

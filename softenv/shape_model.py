@@ -340,6 +340,8 @@ class ShapeModel:
             raise ValueError(f"{str(path)!r} has inconsistent arrays: components {comps.shape}, mean {mean.shape}, "
                              f"n_components {k}")
         recorded = meta.get("mesh")
+        if recorded is not None and not isinstance(recorded, dict):
+            raise ValueError(f"{str(path)!r} has an invalid header: mesh is {recorded!r}, not a mesh spec")
         if mesh is not None:
             if recorded is not None and recorded.get("fingerprint") != mesh.fingerprint:
                 raise ValueError(f"{str(path)!r} was fitted on mesh {recorded.get('fingerprint')!r}, "
@@ -347,9 +349,15 @@ class ShapeModel:
             if mean.size != 3 * mesh.n_vertices:
                 raise ValueError(f"{str(path)!r} has {mean.size} coordinates; the given mesh has "
                                  f"{mesh.n_vertices} vertices ({3 * mesh.n_vertices} coordinates)")
+        if arrays["spectrum"].ndim != 1 or arrays["spectrum"].size < k:
+            raise ValueError(f"{str(path)!r} has a spectrum of shape {arrays['spectrum'].shape}; expected at least {k} "
+                             "values")
         model = cls(k)
-        model._set_state(mean, comps, arrays["spectrum"], meta["total_variance"], k, meta["rule"], meta["picks"],
-                         meta["n_samples"], recorded, meta.get("noise_std"))
+        try:
+            model._set_state(mean, comps, arrays["spectrum"], float(meta["total_variance"]), k, meta["rule"],
+                             meta["picks"], int(meta["n_samples"]), recorded, meta.get("noise_std"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{str(path)!r} has an invalid header (missing or bad {exc}); re-create the file") from None
         model.b_min_, model.b_max_ = arrays["b_min"], arrays["b_max"]
         return model
 

@@ -206,3 +206,108 @@ def test_saved_artifacts_honour_the_umask(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "a.npz").stat().st_mode & 0o777 == 0o664
+
+
+# -- files: every artifact checked on load, every cache entry against what it was built from ------
+
+def _rewrite(path, meta=None, **arrays):
+    """Copy an artifact with its header replaced (``meta``: a function of the old header) or arrays changed."""
+    import json
+
+    with np.load(path, allow_pickle=False) as data:
+        contents = {name: data[name] for name in data.files if name != "built_from.txt"}
+    header = json.loads(str(contents["__meta__"][()]))
+    if meta is not None:
+        contents["__meta__"] = np.array(json.dumps(meta(header)))
+    contents.update(arrays)
+    np.savez(path, **contents)
+
+
+@pytest.fixture
+def fitted(tmp_path):
+    from softenv import ShapeModel, paper_dataset
+    from softenv.response import PolynomialResponse
+
+    data = paper_dataset(441, 4, 3)
+    model = ShapeModel(4).fit(data.shapes, data.mesh)
+    model.save(tmp_path / "model.npz")
+    response = PolynomialResponse(order=1).fit(data.forces, model.encode(data.shapes))
+    response.save(tmp_path / "response.npz")
+    return tmp_path / "model.npz", tmp_path / "response.npz"
+
+
+def test_loaders_refuse_damaged_headers_and_arrays(fitted):
+    import shutil
+
+    from softenv import ShapeModel
+    from softenv.response import ResponseModel
+
+    model_path, response_path = fitted
+    cases = [
+        (model_path, dict(meta=lambda h: {k: v for k, v in h.items() if k != "n_samples"}), ShapeModel.load, "n_samples"),
+        (model_path, dict(meta=lambda h: [h]), ShapeModel.load, "header of type list"),
+        (model_path, {"components": lambda a: np.where(np.arange(a.size).reshape(a.shape) == 5, np.nan, a)},
+         ShapeModel.load, "array 'components' has nan"),
+        (response_path, {"state_coef": lambda a: np.full_like(a, np.nan)}, ResponseModel.load, "array 'state_coef' has nan"),
+        (response_path, {"output_scale": lambda a: a[:-1]}, ResponseModel.load, "array 'output_scale' has shape"),
+        (response_path, dict(meta=lambda h: {**h, "n_features": "four"}), ResponseModel.load, "invalid"),
+    ]
+    for i, (source, change, load, message) in enumerate(cases):
+        path = source.with_name(f"case{i}.npz")
+        shutil.copy(source, path)
+        if "meta" in change:
+            _rewrite(path, meta=change["meta"])
+        else:
+            (name, fn), = change.items()
+            with np.load(source, allow_pickle=False) as data:
+                _rewrite(path, **{name: fn(data[name])})
+        with pytest.raises(ValueError, match=message):
+            load(path)
+
+
+SMALL = {"mesh": {"resolution": 9}, "shape_model": {"n_contacts": 8, "n_loads": 4, "n_components": 4}}
+
+
+def _scene(**sections):
+    from softenv.envs.config import make_config
+    from softenv.envs.scene import _SCENES, build_scene
+
+    _SCENES.clear()                                  # the in-process memo would hide the disk cache
+    return build_scene(make_config(**{**SMALL, **sections}))
+
+
+@pytest.mark.parametrize("kind, a, b", [
+    ("table", {"response": {"table_nodes": (5, 3, 3, 3)}}, {"response": {"table_nodes": (6, 3, 3, 3)}}),
+    ("shape-model", {"tissue": {"E": 1e5}}, {"tissue": {"E": 2e5}}),
+    ("workspace", {"tissue": {"E": 1e5}}, {"tissue": {"E": 2e5}}),
+])
+def test_a_cache_entry_swapped_in_from_another_config_is_rebuilt_not_used(tmp_path, monkeypatch, kind, a, b):
+    import shutil
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    _scene(**a)
+    file_a = set(tmp_path.glob(f"{kind}-*.npz"))
+    expected = _scene(**b)
+    (file_b,) = set(tmp_path.glob(f"{kind}-*.npz")) - file_a
+    shutil.copy(*file_a, file_b)                     # another config's entry under this config's name
+    with pytest.warns(RuntimeWarning, match="was built from config"):
+        again = _scene(**b)
+    features = expected.workspace.low + 0.3 * (np.asarray(expected.workspace.high) - expected.workspace.low)
+    np.testing.assert_array_equal(again.response.predict(features[None]), expected.response.predict(features[None]))
+    np.testing.assert_array_equal(again.data.shapes, expected.data.shapes)
+
+
+def test_a_cache_entry_whose_header_lacks_a_key_is_rebuilt(tmp_path, monkeypatch):
+    import zipfile
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    expected = _scene()
+    (entry,) = tmp_path.glob("shape-model-*.npz")
+    with zipfile.ZipFile(entry) as archive:
+        stamp = archive.read("built_from.txt")
+    _rewrite(entry, meta=lambda h: {k: v for k, v in h.items() if k != "total_variance"})
+    with zipfile.ZipFile(entry, "a") as archive:      # keep its (right) stamp: only the header is damaged
+        archive.writestr("built_from.txt", stamp)
+    with pytest.warns(RuntimeWarning, match="total_variance"):
+        again = _scene()
+    np.testing.assert_array_equal(again.shape_model.components_, expected.shape_model.components_)

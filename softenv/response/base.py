@@ -154,13 +154,16 @@ class ResponseModel:
                              f"{shape_model.fingerprint()!r} (another mesh or k)")
         try:
             model = model_cls._from_saved(meta["params"], arrays, meta, shape_model, path)
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"{str(path)!r} has an invalid {kind!r} header: {exc}") from exc
+        except (KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{str(path)!r} has an invalid {kind!r} header (missing or bad {exc})") from exc
         model.b_low_, model.b_high_ = arrays["b_low"], arrays["b_high"]
         model.shape_model_fingerprint_ = recorded
-        if model.input_scaler_.scale.shape != (model.n_features_,) or model.b_low_.shape != (model.n_outputs_,):
-            raise ValueError(f"{str(path)!r} has arrays inconsistent with n_features={model.n_features_}, "
-                             f"n_outputs={model.n_outputs_}")
+        expected = {"input_scale": model.n_features_, "input_offset": model.n_features_, "output_scale": model.n_outputs_,
+                    "output_offset": model.n_outputs_, "b_low": model.n_outputs_, "b_high": model.n_outputs_}
+        for name, size in expected.items():
+            if arrays[name].shape != (size,):
+                raise ValueError(f"{str(path)!r}: array {name!r} has shape {arrays[name].shape}; expected ({size},) for "
+                                 f"n_features={model.n_features_}, n_outputs={model.n_outputs_}")
         return model
 
     @classmethod
