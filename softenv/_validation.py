@@ -26,10 +26,15 @@ def check_real(value: Any, name: str, low: float | None = None, high: float | No
     """A finite real number inside ``[low, high]`` (ends open where asked); returned as float."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{name} must be a real number, got {_show(value)}")
-    x = float(value)
     lo = "-inf" if low is None else f"{low:g}"
     hi = "inf" if high is None else f"{high:g}"
     allowed = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
+    try:
+        x = float(value)
+    except OverflowError:                    # an int beyond any float, e.g. 10**400
+        digits = len(str(abs(int(value)))) - 1
+        raise ValueError(f"{name}={'-' if value < 0 else ''}1e+{digits} (about) is out of range; allowed range "
+                         f"{allowed}") from None
     if not math.isfinite(x):
         raise ValueError(f"{name} must be finite, got {x!r}; allowed range {allowed}")
     if low is not None and (x < low or (low_open and x == low)):

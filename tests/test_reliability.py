@@ -311,3 +311,40 @@ def test_a_cache_entry_whose_header_lacks_a_key_is_rebuilt(tmp_path, monkeypatch
     with pytest.warns(RuntimeWarning, match="total_variance"):
         again = _scene()
     np.testing.assert_array_equal(again.shape_model.components_, expected.shape_model.components_)
+
+
+# -- settings: a documented range that works, the same verdict single and batched -----------------
+
+@pytest.mark.parametrize("sections, message", [
+    ({"tissue": {"E": 1e25}}, r"tissue.E=1e\+25 is out of range; allowed range \[0.001, 1e\+12\]"),
+    ({"tissue": {"E": 5e-324}}, "tissue.E=4.94066e-324 is out of range"),
+    ({"tissue": {"E": 10 ** 400}}, r"tissue.E=1e\+400 \(about\) is out of range"),
+    ({"tissue": {"radius": 1e-300, "patch_radius": 1e-300}}, "tissue.radius=1e-300 is out of range"),
+    ({"tissue": {"patch_radius": 1e-5}}, r"tissue.patch_radius=1e-05 m must lie within \[radius / 1000, radius\]"),
+    ({"tissue": {"E": 1e12}, "device": {"max_normal_force": 1e-6}}, "at least 1e-09 is needed"),
+    ({"task": {"target_normal_force": (0.0, 0.0), "target_sideways_force": (0.0, 0.0)}}, "every target"),
+])
+def test_settings_outside_what_works_are_refused_alike_by_single_and_batched(sections, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make("SoftSphere-v0", **sections)
+    with pytest.raises(ValueError, match=message):
+        gym.make_vec("SoftSphere-v0", 2, vectorization_mode="vector_entry_point", **sections)
+
+
+@pytest.mark.parametrize("tissue", [
+    {"E": 1e-3}, {"E": 1e12}, {"E": 1e-3, "law": "stiffening"}, {"E": 1e12, "law": "stiffening"},
+    {"radius": 1e-4, "patch_radius": 1e-7}, {"radius": 1.0, "patch_radius": 1.0},
+], ids=["E-min", "E-max", "stiff-E-min", "stiff-E-max", "radius-min", "radius-max"])
+def test_the_corners_of_the_documented_ranges_step_finite_and_agree(tissue):
+    small = {"mesh": {"resolution": 9}, "shape_model": {"n_contacts": 8, "n_loads": 4, "n_components": 4}}
+    single = gym.make("SoftSphere-v0", tissue=tissue, **small)
+    batched = gym.make_vec("SoftSphere-v0", 2, vectorization_mode="vector_entry_point", tissue=tissue, **small)
+    obs, _ = single.reset(seed=0)
+    obs_b, _ = batched.reset(seed=0)
+    np.testing.assert_array_equal(obs, obs_b[0])
+    for a in (np.array([1.0, 1.0, 1.0, 1.0]), np.array([-1.0, -1.0, 0.0, -1.0]), np.zeros(4)):
+        obs, reward, *_ = single.step(a)
+        obs_b, rewards, *_ = batched.step(np.stack([a, a]))
+        assert np.isfinite(obs).all() and np.isfinite(reward) and single.observation_space.contains(obs)
+        np.testing.assert_array_equal(obs, obs_b[0])
+        assert reward == rewards[0]

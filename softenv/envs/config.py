@@ -11,6 +11,7 @@ prints the whole table.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -23,6 +24,9 @@ class UnknownSectionError(TypeError, ValueError):
     """A keyword that is no scene section. A ``TypeError`` of Python's usual form (``... got an unexpected
     keyword argument 'x'``), which wrappers such as TorchRL's ``GymEnv`` test for before retrying without
     the keyword; also a ``ValueError``, as every other bad setting."""
+
+
+MIN_DESIGN_INDENTATION = 1e-9     # of the radius, at device.max_normal_force (see validate_config)
 
 
 @dataclass(frozen=True)
@@ -83,11 +87,12 @@ SCHEMA: dict[str, dict[str, Field]] = {
     "tissue": {
         "law": Field("linear", "", "linear | stiffening", _choice("linear", "stiffening"),
                      "linear (the paper's regime) or Fung stiffening with Hertzian contact widening"),
-        "E": Field(effective_modulus(), "Pa", "> 0", _real(0, None, lo_open=True),
-                   "effective Young's modulus (default: 40 N indents 40 % of the radius)"),
+        "E": Field(effective_modulus(), "Pa", "[1e-3, 1e12]", _real(1e-3, 1e12),
+                   "effective Young's modulus (default: 40 N indents 40 % of the radius; steel is 2e11)"),
         "nu": Field(TONGUE_POISSON, "", "[0, 0.5)", _real(0, 0.5, hi_open=True), "Poisson's ratio"),
-        "radius": Field(TONGUE_RADIUS_M, "m", "(0, 1]", _real(0, 1, lo_open=True), "sphere radius"),
-        "patch_radius": Field(BLADE_PATCH_RADIUS_M, "m", "(0, radius]", _real(0, 1, lo_open=True), "blade contact-patch radius"),
+        "radius": Field(TONGUE_RADIUS_M, "m", "[1e-4, 1]", _real(1e-4, 1), "sphere radius"),
+        "patch_radius": Field(BLADE_PATCH_RADIUS_M, "m", "[radius / 1000, radius]", _real(1e-7, 1),
+                              "blade contact-patch radius"),
     },
     "mesh": {
         "kind": Field("latlong", "", "latlong | icosphere", _choice("latlong", "icosphere"), "surface sampling"),
@@ -218,8 +223,20 @@ def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, An
         values = config.get(section, {})
         out[section] = {key: f.check(values.get(key, f.default), f"{section}.{key}") for key, f in fields.items()}
     t, dev, task = out["tissue"], out["device"], out["task"]
-    if t["patch_radius"] > t["radius"]:
-        raise ValueError(f"tissue.patch_radius={t['patch_radius']:g} m exceeds tissue.radius={t['radius']:g} m")
+    if not t["radius"] / 1000 * (1 - 1e-12) <= t["patch_radius"] <= t["radius"]:      # ends included despite rounding
+        raise ValueError(f"tissue.patch_radius={t['patch_radius']:g} m must lie within [radius / 1000, radius] = "
+                         f"[{t['radius'] / 1000:g}, {t['radius']:g}] m (tissue.radius={t['radius']:g} m)")
+    # the design force's indentation over the radius (linear law): below ~1e-9 the deformations drown in the
+    # rounding of the surface coordinates and the shape model has nothing to fit
+    design = 2 * (1 - t["nu"] ** 2) * dev["max_normal_force"] / (math.pi * t["patch_radius"] * t["E"] * t["radius"])
+    if design < MIN_DESIGN_INDENTATION:
+        raise ValueError(f"device.max_normal_force={dev['max_normal_force']:g} N on tissue.E={t['E']:g} Pa indents the "
+                         f"sphere (tissue.radius={t['radius']:g} m, tissue.patch_radius={t['patch_radius']:g} m) by "
+                         f"{design:.2g} of its radius; at least {MIN_DESIGN_INDENTATION:g} is needed to resolve the "
+                         "deformations: lower tissue.E or raise device.max_normal_force")
+    if task["target_normal_force"] == (0.0, 0.0) and task["target_sideways_force"] == (0.0, 0.0):
+        raise ValueError("task.target_normal_force and task.target_sideways_force are both (0, 0): every target "
+                         "would be the rest shape; give the target family a force")
     if dev["insertion_deg"][1] <= dev["insertion_deg"][0]:
         raise ValueError(f"device.insertion_deg={dev['insertion_deg']!r}: high must exceed low")
     mesh = out["mesh"]
