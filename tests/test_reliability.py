@@ -348,3 +348,38 @@ def test_the_corners_of_the_documented_ranges_step_finite_and_agree(tissue):
         assert np.isfinite(obs).all() and np.isfinite(reward) and single.observation_space.contains(obs)
         np.testing.assert_array_equal(obs, obs_b[0])
         assert reward == rewards[0]
+
+
+# -- the laryngoscope at the corners of its documented ranges ------------------------------------
+
+DEVICE_CORNERS = {
+    "stiffest coupling, lightest blade": {"device": {"coupling_stiffness": 1e7, "blade_mass": 0.005}},
+    "stiffest wrist": {"device": {"rotational_stiffness": 1e5, "blade_mass": 0.005}},
+    "most damping, lightest blade": {"device": {"coupling_damping": 1e5, "rotational_damping": 1e3, "blade_mass": 0.005}},
+    "softest coupling": {"device": {"coupling_stiffness": 1e-6, "rotational_stiffness": 1e-6, "coupling_damping": 0.0}},
+    "fastest hand, most friction": {"device": {"max_hand_speed": 5, "max_sweep_speed": 5, "max_pitch_rate": 20,
+                                               "friction": 5}},
+    "heaviest": {"device": {"blade_mass": 10, "handle_mass": 10}},
+    "finest substep": {"device": {"max_substep": 1e-6}},
+    "longest control period": {"dynamics": {"dt": 10.0}},
+    "softest tissue": {"tissue": {"E": 1e-3}},
+    "stiffest tissue": {"tissue": {"E": 1e12, "law": "stiffening"}},
+    "largest forces": {"device": {"max_normal_force": 1e6, "max_sideways_force": 1e6}},
+}
+
+
+@pytest.mark.parametrize("sections", list(DEVICE_CORNERS.values()), ids=list(DEVICE_CORNERS))
+def test_the_laryngoscope_stays_finite_at_the_corners_of_its_ranges(sections):
+    single = gym.make("SoftSphereHaptic-v0", **sections)
+    batched = gym.make_vec("SoftSphereHaptic-v0", 2, vectorization_mode="vector_entry_point", **sections)
+    obs, _ = single.reset(seed=1)
+    batched.reset(seed=1)
+    space = single.observation_space
+    for a in (np.array([1.0, 1.0, -1.0, 1.0]), np.array([-1.0, 1.0, 1.0, -1.0])):   # bang-bang, into the teeth
+        obs, reward, _, _, info = single.step(a)
+        obs_b, rewards, _, _, info_b = batched.step(np.stack([a, -a]))
+        assert space.contains(obs) and np.isfinite(reward)
+        assert all(np.isfinite(v).all() for v in info.values() if not isinstance(v, bool))
+        assert np.isfinite(obs_b).all() and np.isfinite(rewards).all()
+        np.testing.assert_array_equal(obs_b[0], obs)           # env 0 of the twin is the single env, bit for bit
+        assert rewards[0] == reward

@@ -33,10 +33,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import SphereMesh
-from ..tissue import AnalyticTissue, TissueParams
+from ..tissue import DESIGN_INDENTATION, AnalyticTissue, TissueParams, effective_modulus
 
 TABLE_INTERVALS = 4096
-_LOAD_SPAN = (1e-7, 1e5)        # loads tabulated, as multiples of the design force
+_LOAD_SPAN = (1e-7, 1e5)        # loads tabulated, as multiples of the design force and of the tissue's own scale
 
 
 class TongueContact:
@@ -59,7 +59,11 @@ class TongueContact:
         self.radius = tissue.radius
         self.friction = friction
         self.analytic = AnalyticTissue(mesh, tissue)
-        loads = np.concatenate([[0.0], design_force * np.geomspace(*_LOAD_SPAN, 20_000)])
+        # from well below to well above both the device's force and the tissue's (the load indenting it by the
+        # design share of its radius), so a tissue far softer or stiffer than the device still gets its rising part
+        own = tissue.E / effective_modulus(1.0, DESIGN_INDENTATION, tissue.nu, tissue.radius, tissue.patch_radius)
+        low, high = min(design_force, own) * _LOAD_SPAN[0], max(design_force, own) * _LOAD_SPAN[1]
+        loads = np.concatenate([[0.0], np.geomspace(low, high, 20_000)])
         depth = self.indentation(loads)
         # saturation flattens W(P) to the float resolution at huge loads: keep the strictly rising part
         flat = np.flatnonzero(np.diff(depth) <= 0)
