@@ -1,11 +1,12 @@
 """Wall time of ``softenv compare`` by executor, and proof that the executor does not change a number.
 
-Runs the full benchmark with ``--jobs 1`` and ``--jobs 2`` (the second one writes ``results/benchmark.*``),
-and the quick benchmark over local workers and over a local Ray instance, each from fresh training
-runs; checks that every table cell except the measured decision times is identical; writes
-``results/scaleout.md``. Takes about 80 minutes on 2 cores.
+Runs one benchmark plan three ways from fresh training runs -- one process (``--jobs 1``), two local
+worker processes (``--jobs 2``) and a local Ray instance with two CPUs (``--executor ray --jobs 2``)
+-- checks that every table cell except the measured decision times is identical, and writes
+``results/scaleout.md``. CartPole-v1's step rate, measured first, says how fast the machine was.
 
-    python scripts/scaleout.py [--skip-full]
+    python scripts/scaleout.py                 # the quick plan (SoftSphere-v0, short agent budgets)
+    python scripts/scaleout.py --plan full     # the full benchmark (hours on 2 cores)
 """
 
 from __future__ import annotations
@@ -20,13 +21,15 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+RUNS = {"one process (--jobs 1)": ["--jobs", "1"], "2 local workers (--jobs 2)": ["--jobs", "2"],
+        "local Ray, 2 CPUs (--executor ray --jobs 2)": ["--executor", "ray", "--jobs", "2"]}
 
 
 def compare(args: list[str], out: Path, runs: Path) -> tuple[float, dict]:
-    """Run ``softenv compare`` from fresh runs; returns its wall time and its JSON report."""
+    """Run ``softenv compare`` from empty training runs; returns its wall time and its JSON report."""
     shutil.rmtree(runs, ignore_errors=True)
     command = [sys.executable, "-m", "softenv", "compare", *args, "--out", str(out), "--runs", str(runs)]
-    print("$", " ".join(command[2:]), flush=True)
+    print("$ softenv", " ".join(command[3:]), flush=True)
     t0 = time.perf_counter()
     subprocess.run(command, check=True, cwd=ROOT)
     wall = time.perf_counter() - t0
@@ -41,39 +44,32 @@ def cells(report: dict) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--skip-full", action="store_true", help="only the quick benchmark (local against Ray)")
+    parser.add_argument("--plan", choices=["quick", "full"], default="quick")
     args = parser.parse_args()
-    rows, checks = [], []
+    from softenv.bench.timing import cartpole_steps_per_second
+
+    cartpole = 1.0 / cartpole_steps_per_second(100_000).median
+    plan = ["--quick"] if args.plan == "quick" else []
+    results = {}
     with tempfile.TemporaryDirectory() as tmp:
-        scratch = Path(tmp)
-        if not args.skip_full:
-            wall1, rep1 = compare(["--jobs", "1"], scratch / "jobs1", ROOT / "runs" / "scaleout-jobs1")
-            wall2, rep2 = compare(["--jobs", "2"], ROOT / "results", ROOT / "runs" / "scaleout-jobs2")
-            rows += [("full", "local, --jobs 1", wall1, len(rep1["summaries"])),
-                     ("full", "local, --jobs 2", wall2, len(rep2["summaries"]))]
-            checks.append(("full benchmark: --jobs 2 against --jobs 1", cells(rep1) == cells(rep2)))
-        wall_l, rep_l = compare(["--quick", "--jobs", "2"], scratch / "quick-local", ROOT / "runs" / "scaleout-quick-local")
-        wall_r, rep_r = compare(["--quick", "--jobs", "2", "--executor", "ray"], scratch / "quick-ray",
-                                ROOT / "runs" / "scaleout-quick-ray")
-        rows += [("quick", "local, --jobs 2", wall_l, len(rep_l["summaries"])),
-                 ("quick", "Ray (local instance, 2 CPUs), --jobs 2", wall_r, len(rep_r["summaries"]))]
-        checks.append(("quick benchmark: Ray against local", cells(rep_l) == cells(rep_r)))
-        machine = rep_l["provenance"]["machine"]
+        for i, (how, extra) in enumerate(RUNS.items()):
+            results[how] = compare(plan + extra, Path(tmp) / str(i), ROOT / "runs" / f"scaleout-{args.plan}-{i}")
+    (wall1, rep1), (wall2, rep2), (wall_ray, rep_ray) = results.values()
     lines = ["# softenv compare: wall time by executor\n",
-             f"Made by `python scripts/scaleout.py{' --skip-full' if args.skip_full else ''}` "
-             f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {machine}). Every run starts from empty "
-             "training runs; BLAS and torch on one thread per worker.\n",
-             "| plan | executor | wall time (min) | cells |", "|---|---|---|---|"]
-    lines += [f"| {plan} | {how} | {wall / 60:.1f} | {n} |" for plan, how, wall, n in rows]
-    if not args.skip_full:
-        lines.append(f"\nSpeed-up of `--jobs 2` over `--jobs 1`: {rows[0][2] / rows[1][2]:.2f}x.")
-    lines.append(f"Ray's overhead over local workers (quick plan): {wall_r - wall_l:+.0f} s "
-                 f"({100 * (wall_r / wall_l - 1):+.0f} %).\n")
-    lines += ["Identical results (every table cell except the measured decision times):", ""]
-    lines += [f"- {what}: {'yes' if same else '**no**'}" for what, same in checks]
+             f"Made by `python scripts/scaleout.py --plan {args.plan}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+             f"{rep1['provenance']['machine']}; CartPole-v1 stepped at {cartpole:,.0f} steps/s during this run). The "
+             f"{args.plan} plan: {len(rep1['summaries'])} table cells (policy x scene); every run starts "
+             "from empty training runs, BLAS and torch on one thread per worker.\n",
+             "| executor | wall time (s) | against one process |", "|---|---|---|"]
+    lines += [f"| {how} | {wall:.0f} | {wall1 / wall:.2f}x |" for how, (wall, _) in results.items()]
+    lines += ["", f"Ray's overhead over local workers: {wall_ray - wall2:+.0f} s ({100 * (wall_ray / wall2 - 1):+.0f} %): "
+              "starting the local instance and shipping each job's code and result.", "",
+              "Identical results (every table cell except the measured decision times):", "",
+              f"- 2 local workers against one process: {'yes' if cells(rep2) == cells(rep1) else '**no**'}",
+              f"- Ray against one process: {'yes' if cells(rep_ray) == cells(rep1) else '**no**'}"]
     (ROOT / "results" / "scaleout.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
-    if not all(same for _, same in checks):
+    if not cells(rep2) == cells(rep1) == cells(rep_ray):
         sys.exit(1)
 
 
