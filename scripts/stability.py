@@ -1,0 +1,186 @@
+"""Numerical stability over the documented ranges, and a long soak; writes ``results/stability.md``.
+
+1. Sweep: for each case (one setting at the ends of its documented range, the rest at SoftSphere-v0's
+   defaults) an episode of bang-bang and random actions in the single env. Every step's surface is
+   decoded in float32 and in float64; the table gives the largest float32 error against the float64
+   reference (over the radius), whether everything stayed finite, and whether the surfaces stayed
+   valid: no vertex past the centre (each stays on its own side: ``x . x_rest > 0``) and no inverted
+   triangle (every triangle's normal keeps facing out). The analytic tissue itself is checked at forces
+   to 10x the device's range. Laryngoscope cases step SoftSphereHaptic-v0 the same way.
+2. Soak: 1,000,000 steps of SoftSphere-v0 and 100,000 of SoftSphereHaptic-v0, half random, half
+   bang-bang actions: memory before and after (traced Python allocations and the process's resident
+   size), and the same-seed episode at the start and at the end, compared bit for bit.
+
+    python scripts/stability.py [--soak-steps 1000000] [--haptic-soak-steps 100000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import time
+import tracemalloc
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import softenv  # noqa: F401
+from softenv.tissue import AnalyticTissue
+
+ROOT = Path(__file__).resolve().parent.parent
+STEPS = 40
+
+CASES: list[tuple[str, str, dict[str, Any]]] = [
+    ("default", "SoftSphere-v0", {}),
+    ("E = 1e-3 Pa", "SoftSphere-v0", {"tissue": {"E": 1e-3}}),
+    ("E = 1e12 Pa", "SoftSphere-v0", {"tissue": {"E": 1e12}}),
+    ("E = 1e-3 Pa, stiffening", "SoftSphere-v0", {"tissue": {"E": 1e-3, "law": "stiffening"}}),
+    ("E = 1e12 Pa, stiffening", "SoftSphere-v0", {"tissue": {"E": 1e12, "law": "stiffening"}}),
+    ("nu = 0", "SoftSphere-v0", {"tissue": {"nu": 0.0}}),
+    ("nu = 0.4999", "SoftSphere-v0", {"tissue": {"nu": 0.4999}}),
+    ("radius 0.1 mm, patch radius/1000", "SoftSphere-v0", {"tissue": {"radius": 1e-4, "patch_radius": 1e-7}}),
+    ("radius 1 m, patch = radius", "SoftSphere-v0", {"tissue": {"radius": 1.0, "patch_radius": 1.0}}),
+    ("forces to 1e6 N", "SoftSphere-v0", {"device": {"max_normal_force": 1e6, "max_sideways_force": 1e6}}),
+    ("creep tau = 0", "SoftSphereViscoelastic-v0", {"dynamics": {"time_constant": 0.0}}),
+    ("creep tau = 1e6 s, dt = 1e-4 s", "SoftSphereViscoelastic-v0", {"dynamics": {"time_constant": 1e6, "dt": 1e-4}}),
+    ("creep tau = 1e-6 s, dt = 10 s", "SoftSphereViscoelastic-v0", {"dynamics": {"time_constant": 1e-6, "dt": 10.0}}),
+    ("creep, relaxed fraction 1e-6", "SoftSphereViscoelastic-v0", {"dynamics": {"relaxed_fraction": 1e-6}}),
+    ("laryngoscope default", "SoftSphereHaptic-v0", {}),
+    ("coupling 1e7 N/m, blade 5 g", "SoftSphereHaptic-v0", {"device": {"coupling_stiffness": 1e7, "blade_mass": 0.005}}),
+    ("coupling 1e-6 N/m", "SoftSphereHaptic-v0", {"device": {"coupling_stiffness": 1e-6, "rotational_stiffness": 1e-6}}),
+    ("damping at its maximum, blade 5 g", "SoftSphereHaptic-v0",
+     {"device": {"coupling_damping": 1e5, "rotational_damping": 1e3, "blade_mass": 0.005}}),
+    ("blade and handle 10 kg", "SoftSphereHaptic-v0", {"device": {"blade_mass": 10.0, "handle_mass": 10.0}}),
+    ("laryngoscope on E = 1e-3 Pa", "SoftSphereHaptic-v0", {"tissue": {"E": 1e-3}}),
+    ("laryngoscope on E = 1e12 Pa", "SoftSphereHaptic-v0", {"tissue": {"E": 1e12}}),
+]
+
+
+def surface_checks(env: Any, b: np.ndarray) -> tuple[float, bool]:
+    """float32 decode error against float64 (over the radius) and validity of the float64 surface."""
+    world = env.unwrapped.world
+    model, mesh = world.scene.shape_model, world.scene.mesh
+    exact = model.decode(b.astype(np.float64)).reshape(-1, 3)
+    single = model.decode(b.astype(np.float32)).reshape(-1, 3).astype(np.float64)
+    error = float(np.max(np.abs(single - exact))) / mesh.radius
+    rest = mesh.vertices
+    tri = exact[mesh.triangles]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    rest_tri = rest[mesh.triangles]
+    rest_normals = np.cross(rest_tri[:, 1] - rest_tri[:, 0], rest_tri[:, 2] - rest_tri[:, 0])
+    valid = bool(np.all(np.sum(exact * rest, axis=1) > 0) and np.all(np.sum(normals * rest_normals, axis=1) > 0))
+    return error, valid
+
+
+def sweep_case(env_id: str, sections: dict[str, Any]) -> dict[str, Any]:
+    env = gym.make(env_id, **sections)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    worst, finite, valid = 0.0, True, True
+    t0 = time.perf_counter()
+    for step in range(STEPS):
+        a = rng.choice([-1.0, 1.0], 4) if step % 2 else rng.uniform(-1, 1, 4)
+        obs, reward, terminated, truncated, info = env.step(a)
+        finite &= bool(np.isfinite(obs).all() and np.isfinite(reward))
+        error, ok = surface_checks(env, env.unwrapped._b)
+        worst, valid = max(worst, error), valid and ok
+        if terminated or truncated:
+            env.reset()
+    # the analytic tissue itself at up to 10x the device's largest forces
+    world = env.unwrapped.world
+    dev = world.config["device"]
+    tissue = AnalyticTissue(world.scene.mesh, world.scene.tissue)
+    R = world.scene.tissue.radius
+    n = 64
+    theta = rng.uniform(0, np.pi / 2, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    contacts = R * np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    scale = 10 * rng.uniform(0, 1, (n, 1)) ** 0.3
+    forces = scale * np.stack([dev["max_sideways_force"] * rng.uniform(-1, 1, n), dev["max_sideways_force"] *
+                               rng.uniform(-1, 1, n), -dev["max_normal_force"] * np.ones(n)], axis=1)
+    shapes = tissue.surfaces(contacts, forces).reshape(n, -1, 3)
+    rest = world.scene.mesh.vertices
+    analytic_ok = bool(np.isfinite(shapes).all() and np.all(np.sum(shapes * rest, axis=2) > 0))
+    return {"error": worst, "finite": finite, "valid": valid, "analytic": analytic_ok, "k": world.k,
+            "seconds": time.perf_counter() - t0}
+
+
+def episode(env: Any, seed: int, actions: np.ndarray) -> np.ndarray:
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for a in actions:
+        obs, reward, terminated, truncated, _ = env.step(a)
+        out.append(np.append(obs, reward))
+        if terminated or truncated:
+            break
+    return np.concatenate(out)
+
+
+def resident_mb() -> float:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * 4096 / 1e6
+
+
+def soak(env_id: str, steps: int) -> dict[str, Any]:
+    env = gym.make(env_id)
+    probe = np.random.default_rng(123).uniform(-1, 1, (60, 4))
+    first = episode(env, 7, probe)
+    rng = np.random.default_rng(1)
+    env.reset(seed=1)
+    gc.collect()
+    tracemalloc.start()
+    before_traced, before_rss = tracemalloc.get_traced_memory()[0], resident_mb()
+    t0 = time.perf_counter()
+    block = 10_000
+    for start in range(0, steps, block):
+        n = min(block, steps - start)
+        actions = rng.uniform(-1, 1, (n, 4)) if start < steps // 2 else rng.choice([-1.0, 1.0], (n, 4))
+        for a in actions:
+            _, _, terminated, truncated, _ = env.step(a)
+            if terminated or truncated:
+                env.reset()
+    seconds = time.perf_counter() - t0
+    gc.collect()
+    after_traced, after_rss = tracemalloc.get_traced_memory()[0], resident_mb()
+    tracemalloc.stop()
+    last = episode(env, 7, probe)
+    return {"steps": steps, "seconds": seconds, "traced_kb": (before_traced / 1e3, after_traced / 1e3),
+            "rss_mb": (before_rss, after_rss), "same_episode": bool(np.array_equal(first, last))}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--soak-steps", type=int, default=1_000_000)
+    parser.add_argument("--haptic-soak-steps", type=int, default=100_000)
+    args = parser.parse_args()
+    lines = ["# Stability over the documented ranges, and a soak\n",
+             f"Made by `python scripts/stability.py --soak-steps {args.soak_steps} --haptic-soak-steps "
+             f"{args.haptic_soak_steps}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
+             f"{STEPS} steps alternating uniform random and bang-bang actions; error = largest float32 decode error "
+             "against float64 over the radius; valid = no vertex past the centre and no inverted triangle at any "
+             "step; analytic = the analytic tissue finite and valid at 64 loads up to 10x the device's range.\n",
+             "| case | id | k | float32 error / radius | finite | valid | analytic at 10x | s |", "|---|---|---|---|---|---|---|---|"]
+    healthy = True
+    for name, env_id, sections in CASES:
+        r = sweep_case(env_id, sections)
+        healthy &= r["finite"] and r["valid"] and r["analytic"]
+        lines.append(f"| {name} | {env_id} | {r['k']} | {r['error']:.1e} | {'yes' if r['finite'] else '**no**'} | "
+                     f"{'yes' if r['valid'] else '**no**'} | {'yes' if r['analytic'] else '**no**'} | {r['seconds']:.1f} |")
+        print(lines[-1], flush=True)
+    lines += ["", "| soak | steps | wall (s) | traced Python memory before / after (KB) | resident before / after (MB) | "
+              "same-seed episode at start and end |", "|---|---|---|---|---|---|"]
+    for env_id, steps in (("SoftSphere-v0", args.soak_steps), ("SoftSphereHaptic-v0", args.haptic_soak_steps)):
+        r = soak(env_id, steps)
+        healthy &= r["same_episode"]
+        lines.append(f"| {env_id} | {r['steps']:,} | {r['seconds']:.0f} | {r['traced_kb'][0]:.0f} / {r['traced_kb'][1]:.0f} | "
+                     f"{r['rss_mb'][0]:.0f} / {r['rss_mb'][1]:.0f} | {'bitwise equal' if r['same_episode'] else '**differs**'} |")
+        print(lines[-1], flush=True)
+    (ROOT / "results" / "stability.md").write_text("\n".join(lines) + "\n")
+    if not healthy:
+        raise SystemExit("some case was not finite, valid or reproducible: see results/stability.md")
+
+
+if __name__ == "__main__":
+    main()
