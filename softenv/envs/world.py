@@ -25,8 +25,10 @@ from .parts import Dynamics, TargetFamily, target_schedule
 from .scene import Scene, build_scene, degrees_to_features
 
 OBS_MODES = ("vector", "dict", "vertices")
-# the shape-error floor: a target displacement below this share of the family centre's counts as it
+# the shape-error floor: a target displacement below this share of the family centre's counts as it ...
 REFERENCE_FLOOR = 0.1
+# ... and never below this share of the device's design press (a family of vanishing forces keeps finite ratios)
+DESIGN_FLOOR = 1e-6
 
 
 @dataclass
@@ -72,7 +74,11 @@ class World:
         self.inv_sqrt = 1.0 / self.sqrt_variance
         self.b_rest = scene.response.predict_rowwise(scene.rest_features[None])[0]
         centre = scene.response.predict_rowwise(((low + high) / 2)[None])[0]
-        self.floor_sq = (REFERENCE_FLOOR * float(np.sqrt(np.sum((centre - self.b_rest) ** 2)))) ** 2
+        press = (scene.workspace.low + np.asarray(scene.workspace.high)) / 2
+        press[2] = scene.workspace.high[2]                        # the largest pressing force, mid-workspace
+        design = scene.response.predict_rowwise(press[None])[0]
+        self.floor_sq = max(REFERENCE_FLOOR * float(np.sqrt(np.sum((centre - self.b_rest) ** 2))),
+                            DESIGN_FLOOR * float(np.sqrt(np.sum((design - self.b_rest) ** 2)))) ** 2
         self.start_insertion = float(scene.workspace.low[0])
         self._table = scene.response if isinstance(scene.response, TabulatedResponse) else None
         self.action_space = spaces.Box(-1.0, 1.0, (4,), np.float32)
