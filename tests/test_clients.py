@@ -328,3 +328,24 @@ def test_softenv_data_over_two_workers_writes_the_same_data_sets(tmp_path, capsy
         one, two = ForceShapeData.load(tmp_path / "one" / name), ForceShapeData.load(tmp_path / "two" / name)
         np.testing.assert_array_equal(one.shapes, two.shapes)
         np.testing.assert_array_equal(one.forces, two.forces)
+
+
+def test_sb3_adapter_info_keys_keep_what_is_asked_and_refuse_unknown_keys():
+    pytest.importorskip("stable_baselines3")
+    from softenv.envs.sb3 import SoftSphereSB3VecEnv
+
+    scene = {"task": {"horizon": 2}}
+    full, slim = SoftSphereSB3VecEnv(2, **scene), SoftSphereSB3VecEnv(2, info_keys=("is_success",), **scene)
+    for venv in (full, slim):
+        venv.seed(3)
+        venv.reset()
+    a = np.full((2, 4), 0.5, np.float32)
+    (_, _, _, infos_full), (_, _, _, infos) = full.step(a), slim.step(a)
+    assert [set(i) for i in infos] == [{"is_success"}] * 2
+    assert [i["is_success"] for i in infos] == [i["is_success"] for i in infos_full]
+    _, _, dones, infos = slim.step(a)                  # horizon 2: the episode ends, SB3's keys come along
+    assert dones.all() and all({"is_success", "terminal_observation", "TimeLimit.truncated"} == set(i) for i in infos)
+    unknown = SoftSphereSB3VecEnv(2, info_keys=("score",))
+    unknown.reset()
+    with pytest.raises(ValueError, match=r"info_keys \['score'\] are not info keys"):
+        unknown.step(a)

@@ -88,25 +88,31 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
     for n in (256, 1024):
         twin = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point",
                             autoreset_mode="same_step")
-        adapter = SoftSphereSB3VecEnv(n, "SoftSphere-v0")
+        adapters = {"all info keys": SoftSphereSB3VecEnv(n, "SoftSphere-v0"),
+                    "info_keys=('is_success',)": SoftSphereSB3VecEnv(n, "SoftSphere-v0", info_keys=("is_success",))}
         twin.reset(seed=0)
-        adapter.seed(0)
-        adapter.reset()
+        for adapter in adapters.values():
+            adapter.seed(0)
+            adapter.reset()
         actions = [twin.action_space.sample() for _ in range(16)]
-        samples: dict[str, list[float]] = {"twin": [], "adapter": []}
+        runs = {"twin": twin.step, **{name: adapter.step for name, adapter in adapters.items()}}
+        samples: dict[str, list[float]] = {name: [] for name in runs}
         for _ in range(7):
-            for name, step in (("twin", twin.step), ("adapter", adapter.step)):
+            for name, step in runs.items():
                 t0 = time.perf_counter()
                 for i in range(calls):
                     step(actions[i % 16])
                 samples[name].append((time.perf_counter() - t0) / calls)
-        twin_t, adapter_t = Timing(np.array(samples["twin"])), Timing(np.array(samples["adapter"]))
-        ratio = adapter_t.median / twin_t.median
-        spread = np.array(samples["adapter"]) / np.array(samples["twin"])
-        rows.append(Row("sb3", f"SoftSphere-v0: SB3 adapter (SoftSphereSB3VecEnv) over its twin, {n} envs", ratio,
-                        "x the twin's time", f"adapter {n / adapter_t.median:,.0f} vs twin {n / twin_t.median:,.0f} "
-                        f"env-steps/s; paired ratios {spread.min():.2f}-{spread.max():.2f}", "<= 1.3x", ratio <= 1.3))
-        adapter.close()
+        twin_t = Timing(np.array(samples["twin"]))
+        for name in adapters:
+            adapter_t = Timing(np.array(samples[name]))
+            ratio = adapter_t.median / twin_t.median
+            spread = np.array(samples[name]) / np.array(samples["twin"])
+            rows.append(Row("sb3", f"SoftSphere-v0: SB3 adapter, {name}, over its twin, {n} envs", ratio,
+                            "x the twin's time", f"adapter {n / adapter_t.median:,.0f} vs twin "
+                            f"{n / twin_t.median:,.0f} env-steps/s; paired ratios {spread.min():.2f}-{spread.max():.2f}",
+                            "<= 1.3x", ratio <= 1.3))
+            adapters[name].close()
         twin.close()
     return rows
 

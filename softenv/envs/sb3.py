@@ -22,10 +22,16 @@ from .soft_sphere import SoftSphereVectorEnv
 
 
 class SoftSphereSB3VecEnv(VecEnv):
-    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", **scene)``: SB3's view of the batched twin
-    (of any SoftSphere id, the haptic ones included)."""
+    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", info_keys=None, **scene)``: SB3's view of the
+    batched twin (of any SoftSphere id, the haptic ones included).
 
-    def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0", **kwargs: Any) -> None:
+    ``info_keys``: the info keys each env's dict carries (default: all of the env's). SB3's own code reads
+    only ``is_success`` (and the ``terminal_observation`` and ``TimeLimit.truncated`` that are always
+    there); building one dict per env per step is most of this adapter's cost, so training that logs
+    nothing else can pass ``info_keys=("is_success",)``."""
+
+    def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0", info_keys: Sequence[str] | None = None,
+                 **kwargs: Any) -> None:
         spec = gym.spec(env_id)
         entry = spec.vector_entry_point
         if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
@@ -36,6 +42,7 @@ class SoftSphereSB3VecEnv(VecEnv):
         self.venv: SoftSphereVectorEnv = vector_env(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
                                                     **{**spec.kwargs, **kwargs})
         self.env_id = env_id
+        self.info_keys = None if info_keys is None else tuple(info_keys)
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.render_mode = self.venv.render_mode
         self._actions: np.ndarray | None = None
@@ -54,8 +61,12 @@ class SoftSphereSB3VecEnv(VecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         obs, rewards, terminated, truncated, values, final_obs = self.venv.step_values(self._actions)
         dones = terminated | truncated
-        columns = [v.tolist() if v.ndim == 1 else list(v) for v in values.values()]
-        infos = _dict_builder(tuple(values))(columns)
+        if self.info_keys is not None:
+            missing = [key for key in self.info_keys if key not in values]
+            if missing:
+                raise ValueError(f"info_keys {missing} are not info keys of {self.env_id}; available: {list(values)}")
+            values = {key: values[key] for key in self.info_keys}
+        infos = _dict_builder(tuple(values))([_column(v) for v in values.values()])
         if final_obs is not None:
             for i in np.flatnonzero(dones).tolist():
                 infos[i]["terminal_observation"] = final_obs[i]
@@ -86,6 +97,17 @@ class SoftSphereSB3VecEnv(VecEnv):
         if indices is None:
             return range(self.num_envs)
         return [indices] if isinstance(indices, int) else list(indices)
+
+
+def _column(value: np.ndarray) -> list[Any]:
+    """One info key's values as a list of Python objects; a constant column (a term whose weight is 0)
+    repeats one object instead of making one per env."""
+    if value.ndim > 1:
+        return list(value)
+    bits = value.view(f"u{value.itemsize}")       # bit patterns: -0.0 is not 0.0 here, NaN equals itself
+    if len(bits) and (bits == bits[0]).all():
+        return value[:1].tolist() * len(value)
+    return value.tolist()
 
 
 @functools.lru_cache(maxsize=16)
