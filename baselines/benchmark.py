@@ -207,7 +207,7 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
                                                       indent=1, default=float))
     budgets = {a: plan.timesteps.get(a) or {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes}
                for a in plan.agents}
-    md = [f"# Benchmark: baselines and agents on SoftSphere\n",
+    md = ["# Benchmark: baselines and agents on SoftSphere\n",
           f"Made by `{command}` in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",

@@ -19,7 +19,6 @@ import math
 import os
 from collections import OrderedDict
 from statistics import NormalDist
-from typing import Any
 
 import numpy as np
 

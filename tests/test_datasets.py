@@ -1,12 +1,9 @@
-import os
 import time
-import zipfile
 
 import numpy as np
 import pytest
 
-from softenv import _cache
-from softenv._artifact import load_artifact, save_artifact
+from softenv._artifact import save_artifact
 from softenv.datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows, workspace_dataset
 from softenv.forces import DorsumLayout, PaperLayout, Workspace, sample_workspace, unit_samples
 from softenv.geometry import latlong_mesh

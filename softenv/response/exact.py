@@ -10,7 +10,6 @@ operations in the same order, so a batch of environments and single ones agree b
 from __future__ import annotations
 
 import math
-import os
 from typing import Any, Sequence
 
 import numpy as np
