@@ -131,7 +131,15 @@ def test_substeps_follow_the_stiffest_spring():
     assert omega > math.sqrt(1e6 / 0.01)                      # at least the translational mode
     assert stiff.n_substeps == math.ceil(stiff.params.dt * omega / ACCURACY - 1e-9)
     hard = make_device(tissue={"E": 1e7})
-    assert hard.n_substeps > 5 * base.n_substeps              # a stiff tongue needs shorter steps too
+    assert hard.n_substeps > 3 * base.n_substeps              # a stiff tongue's lateral grip needs shorter steps
+    for dev in (base, stiff, hard):
+        # the normal contact's explicit part adds no substeps to those the rest of the device needs;
+        # what it leaves out goes to the implicit barrier
+        p, contact = dev.params, dev.contact
+        without = substep_count(p.dt, p._mode_omega(0.0, contact.lateral_stiffness), p.max_substep)
+        assert dev.n_substeps == max(without, math.ceil(p.dt / p.max_substep - 1e-9))
+        assert 0.0 < p.explicit_contact_stiffness(contact) <= contact.reference_stiffness
+    assert base.params.explicit_contact_stiffness(base.contact) < base.contact.reference_stiffness
 
 
 def test_levering_loads_the_incisors_and_a_straight_press_does_not():

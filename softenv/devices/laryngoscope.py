@@ -76,6 +76,7 @@ import numpy as np
 try:
     import pymunk
     import pymunk.batch
+    from pymunk._chipmunk import ffi as _ffi
     from pymunk._chipmunk import lib as _lib
 except ImportError as exc:  # pragma: no cover - the device extra is part of every test install
     raise ImportError("the simulated laryngoscope needs pymunk >= 7: pip install 'softenv[device]'") from exc
@@ -237,25 +238,45 @@ class LaryngoscopeParams:
         """The stiffest mode's angular frequency (rad/s), over where the tongue may touch.
 
         Sagittal: the largest eigenvalue of ``M^-1 K`` for the blade's ``(x, y, angle)`` with the
-        coupling springs at the grip, the rotary spring, and the contact (at the design force's
-        stiffness) at any point of the underside in any direction. Lateral: ``(k + k_t) / m``.
+        coupling springs at the grip, the rotary spring, and the contact's explicit part
+        (:meth:`explicit_contact_stiffness`) at any point of the underside in any direction.
+        Lateral: ``(k + k_t) / m``.
         """
+        return self._mode_omega(self.explicit_contact_stiffness(contact), contact.lateral_stiffness)
+
+    def explicit_contact_stiffness(self, contact: TongueContact) -> float:
+        """The tongue contact's stiffness integrated explicitly (N/m): the design force's stiffness,
+        capped where it would add substeps to those that ``max_substep``, the coupling and the lateral
+        spring need anyway. The stiffness above it goes to the implicit
+        barrier (:func:`_normal_force`), which is stable at any stiffness and exact at rest, so a
+        stiffer tongue costs no substeps and a held press still settles on the law."""
+        k_ref, lateral = contact.reference_stiffness, contact.lateral_stiffness
+        count = substep_count(self.dt, self._mode_omega(0.0, lateral), self.max_substep)   # needed without it
+        allowed = ACCURACY * count / self.dt
+        if self._mode_omega(k_ref, lateral) <= allowed:
+            return k_ref
+        low, high = 0.0, k_ref                      # omega grows with the contact's stiffness: bisect
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            low, high = (mid, high) if self._mode_omega(mid, lateral) <= allowed else (low, mid)
+        return low
+
+    def _mode_omega(self, contact_stiffness: float, lateral_stiffness: float) -> float:
+        """The stiffest mode (rad/s) with the contact at this stiffness (see :meth:`omega_max`)."""
         gx, gy = self.grip
         k = self.coupling_stiffness
         base = k * (np.outer([1, 0, -gy], [1, 0, -gy]) + np.outer([0, 1, gx], [0, 1, gx])) \
             + self.rotational_stiffness * np.outer([0, 0, 1], [0, 0, 1])
         scale = 1.0 / np.sqrt([self.mass, self.mass, self.moment])
         (hx, hy), (tx, ty) = self.heel, self.tip
-        worst = 0.0
-        for t in np.linspace(0.0, 1.0, 11):
-            rx, ry = hx + t * (tx - hx), hy + t * (ty - hy)
-            for beta in np.linspace(0.0, np.pi, 13):
-                nx, ny = math.cos(beta), math.sin(beta)
-                j = np.array([nx, ny, rx * ny - ry * nx])
-                K = base + contact.reference_stiffness * np.outer(j, j)
-                worst = max(worst, float(np.linalg.eigvalsh(K * np.outer(scale, scale))[-1]))
-        lateral = (k + contact.lateral_stiffness) / self.mass
-        return math.sqrt(max(worst, lateral))
+        t = np.linspace(0.0, 1.0, 11)[:, None]
+        beta = np.linspace(0.0, np.pi, 13)[None, :]
+        rx, ry = hx + t * (tx - hx), hy + t * (ty - hy)
+        nx, ny = np.cos(beta) + 0.0 * rx, np.sin(beta) + 0.0 * rx
+        j = np.stack([nx, ny, rx * ny - ry * nx], axis=-1).reshape(-1, 3)      # every point and direction
+        K = base + contact_stiffness * j[:, :, None] * j[:, None, :]
+        worst = float(np.linalg.eigvalsh(K * np.outer(scale, scale)).max())
+        return math.sqrt(max(worst, (k + lateral_stiffness) / self.mass))
 
     def substeps(self, contact: TongueContact) -> int:
         """Physics substeps per control period."""
@@ -505,11 +526,12 @@ class DeviceState:
 
 def _constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -> _Constants:
     m_eff = p.effective_mass(p.reach())
-    damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(contact.reference_stiffness * m_eff), m_eff / h)
+    k_explicit = p.explicit_contact_stiffness(contact)
+    damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(k_explicit * m_eff), m_eff / h)
     low, high = p.hand_box
     return _Constants(R=p.radius, h=h, inv_m=1.0 / p.mass, inv_I=1.0 / p.moment, h_over_m=h / p.mass,
                       k=p.coupling_stiffness, c=p.coupling_damping, k_t=contact.lateral_stiffness, mu=p.friction,
-                      k_ref=contact.reference_stiffness, damping=damping, step=contact.step, inv_step=contact.inv_step,
+                      k_ref=k_explicit, damping=damping, step=contact.step, inv_step=contact.inv_step,
                       top=contact.top, k_rot=p.rotational_stiffness, c_rot=p.rotational_damping, grip=p.grip,
                       heel=p.heel, tip=p.tip, low=low, high=high)
 
@@ -552,6 +574,24 @@ class _DeviceBase:
         tongue = np.where(touching, self.contact.potential(depth) + 0.5 * self.contact.lateral_stiffness
                           * (ly - anchor) ** 2, 0.0)
         return kinetic + coupling + tongue
+
+    def _clinical(self, ops: Any) -> tuple[Any, ...]:
+        """Each device's values in :data:`softenv.clinical.COLUMNS` order: tongue and incisor force (N),
+        the hand's x, z and lateral y (m), and the moments (N m) about the incisal edge of the
+        coupling's pull on the blade, split into the wrist's (rotary spring and damper: levering)
+        and that of the force at the grip (lifting)."""
+        c = self.c
+        x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
+        hand_lat = self._lateral_state()[2]
+        hvx, hvy, hw, _ = self._hand_v_state()
+        ca, sa = ops.cos(a), ops.sin(a)
+        Fx, Fy, _ = _coupling_force((x, y, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), c)
+        wrist = c.k_rot * (pitch - a) + c.c_rot * (hw - w)
+        ix, iy = self.params.incisor_segment[0]
+        qx = ca * c.grip[0] - sa * c.grip[1]
+        qy = sa * c.grip[0] + ca * c.grip[1]
+        lift = (x + qx - ix) * Fy - (y + qy - iy) * Fx
+        return self.tongue_force, self.incisor_force, gx, gy, hand_lat, wrist, lift
 
     def start_state(self, n: int) -> DeviceState:
         p = self.params
@@ -604,8 +644,30 @@ class Laryngoscope(_DeviceBase):
         self._chand, self._cblade, self._cspace = self._hand._body, self._blade._body, self.space._space
         self._loads, self._slopes = contact.loads_list, contact.slopes_list
         self._touched = False
-        self.space.on_collision(BLADE_TYPE, INCISOR_TYPE, post_solve=self._on_incisor)
+        self._listen_to_incisors()
         self.reset()
+
+    def _listen_to_incisors(self) -> None:
+        """Sum ``|total_impulse|`` of the blade's contact with the incisors after each substep's solve.
+
+        pymunk's post-solve handler builds an ``Arbiter`` and looks up its data on every call (2.4 us,
+        a third of a substep); a cffi callback straight on Chipmunk's handler reads the impulse in
+        0.5 us. Where the platform refuses write+execute memory for cffi callbacks (hardened
+        runtimes), pymunk's handler does the same sum.
+        """
+        self.space.on_collision(BLADE_TYPE, INCISOR_TYPE, post_solve=self._on_incisor)
+        total_impulse = _lib.cpArbiterTotalImpulse
+
+        def post_solve(arbiter: Any, space: Any, data: Any) -> None:
+            j = total_impulse(arbiter)
+            self._impulse += math.sqrt(j.x * j.x + j.y * j.y)
+            self._touched = True
+
+        try:
+            self._post_solve = _ffi.callback("void(cpArbiter *, cpSpace *, cpDataPointer)", post_solve)
+        except (MemoryError, RuntimeError):        # pragma: no cover - platform dependent
+            return
+        self.space._handlers[(BLADE_TYPE, INCISOR_TYPE)]._handler.postSolveFunc = self._post_solve
 
     def _on_incisor(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
         jx, jy = arbiter.total_impulse
@@ -692,16 +754,14 @@ class Laryngoscope(_DeviceBase):
     def observation(self) -> list[float]:
         """The device part of the observation (15 values in (-1, 1); names in
         :data:`softenv.devices.LARYNGOSCOPE_OBS`)."""
-        p, blade, hand = self.params, self._blade, self._hand
+        p = self.params
         (bx, by), (gx, gy) = p.body_start, p.grip_start
-        px, py = blade.position
-        vx, vy = blade.velocity
-        hx, hy = hand.position
+        px, py, a, vx, vy, w, hx, hy, pitch = self._kinematics()
         lat_y, lat_v, hand_lat, _ = self._lateral
         P, Q = self._contact[0], self._contact[1]
-        raw = ((px - bx) / POSITION_SCALE, (py - by) / POSITION_SCALE, blade.angle / ANGLE_SCALE, lat_y / LATERAL_SCALE,
-               vx / SPEED_SCALE, vy / SPEED_SCALE, blade.angular_velocity / SPIN_SCALE, lat_v / LATERAL_SPEED_SCALE,
-               (hx - gx) / POSITION_SCALE, (hy - gy) / POSITION_SCALE, hand.angle / ANGLE_SCALE,
+        raw = ((px - bx) / POSITION_SCALE, (py - by) / POSITION_SCALE, a / ANGLE_SCALE, lat_y / LATERAL_SCALE,
+               vx / SPEED_SCALE, vy / SPEED_SCALE, w / SPIN_SCALE, lat_v / LATERAL_SPEED_SCALE,
+               (hx - gx) / POSITION_SCALE, (hy - gy) / POSITION_SCALE, pitch / ANGLE_SCALE,
                hand_lat / LATERAL_SCALE, P / p.max_normal_force, Q / p.max_sideways_force,
                self._incisor / p.max_normal_force)
         return [_squash(x) for x in raw]
