@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import clinical
+from .._ops import ArrayOps, ScalarOps
 from ..devices.contact import TongueContact
 from ..devices.laryngoscope import Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams
 from .soft_sphere import GOAL_TWINS, GoalReward, SoftSphereEnv, SoftSphereVectorEnv
@@ -129,10 +131,26 @@ class SoftSphereHapticEnv(SoftSphereEnv):
         self.laryngoscope = Laryngoscope(*device_parts(self.world))
         self._box = (self.world.scene.workspace.low, self.world.scene.workspace.high)
         self._rest = self.world.scene.rest_features.tolist()
+        self.clinical = clinical.ClinicalRecorder(1, self.world.config["dynamics"]["dt"], self.world.horizon)
 
     def _start_device(self) -> list[float]:
         self.laryngoscope.reset()
+        self.clinical.start(0, self.laryngoscope._clinical(ScalarOps))
         return [0.0, 0.0, 0.0, 0.0]
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        self.clinical.record_one(self.laryngoscope._clinical(ScalarOps))
+        if terminated or truncated:
+            info["clinical"] = self.clinical_summary()
+        return obs, reward, terminated, truncated, info
+
+    def clinical_summary(self) -> dict[str, float]:
+        """The episode's clinical metrics so far (:mod:`softenv.clinical`); in ``info["clinical"]`` at
+        its last step."""
+        w = self.world
+        view = clinical.glottic_view(clinical.sagittal_profile(w.vertices(self._b), w.scene.mesh.triangles), 1.0)
+        return self.clinical.summary(0, view)
 
     def _actuate(self, a: list[float]) -> tuple[list[float], float, float]:
         dev = self.laryngoscope
@@ -192,10 +210,35 @@ class SoftSphereHapticVectorEnv(SoftSphereVectorEnv):
         super().__init__(num_envs, render_mode, obs_mode, max_episode_steps, autoreset_mode, base_scene, **scene)
         self.laryngoscopes = LaryngoscopeBatch(*device_parts(self.world), self.num_envs)
         self._start_state = self.laryngoscopes.start_state(self.num_envs)
+        self.clinical = clinical.ClinicalRecorder(self.num_envs, self.world.config["dynamics"]["dt"],
+                                                  self.world.horizon)
 
     def _start_device(self, mask: np.ndarray) -> np.ndarray:
         self.laryngoscopes.load_state(self._start_state, rows=mask)
+        self.clinical.start(mask, self._clinical_values()[mask])
         return np.zeros(4)
+
+    def _clinical_values(self) -> np.ndarray:
+        return np.stack(np.broadcast_arrays(*self.laryngoscopes._clinical(ArrayOps)), axis=1)
+
+    def _advance(self, a: np.ndarray, stepped: np.ndarray) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                                                    dict[str, np.ndarray]]:
+        obs, reward, terminated, truncated, values = super()._advance(a, stepped)
+        rows = np.flatnonzero(stepped)
+        self.clinical.record(rows, self._clinical_values()[rows])
+        done = terminated | truncated
+        if done.any():                                 # the episode's clinical metrics where it ends
+            summaries = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(done):
+                summaries[i] = self.clinical_summary(int(i))
+            values["clinical"] = summaries
+        return obs, reward, terminated, truncated, values
+
+    def clinical_summary(self, i: int) -> dict[str, float]:
+        """Env ``i``'s episode so far (see :meth:`SoftSphereHapticEnv.clinical_summary`)."""
+        w = self.world
+        view = clinical.glottic_view(clinical.sagittal_profile(w.vertices(self._b[i]), w.scene.mesh.triangles), 1.0)
+        return self.clinical.summary(i, view)
 
     def _actuate(self, a: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dev, scene = self.laryngoscopes, self.world.scene

@@ -104,6 +104,8 @@ def _column(value: np.ndarray) -> list[Any]:
     repeats one object instead of making one per env."""
     if value.ndim > 1:
         return list(value)
+    if value.dtype == object:                      # nested per-env infos ("clinical": a dict, None where absent)
+        return value.tolist()
     bits = value.view(f"u{value.itemsize}")       # bit patterns: -0.0 is not 0.0 here, NaN equals itself
     if len(bits) and (bits == bits[0]).all():
         return value[:1].tolist() * len(value)

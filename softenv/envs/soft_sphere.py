@@ -545,9 +545,25 @@ def _add_masked(infos: dict[str, Any], values: dict[str, np.ndarray], mask: np.n
     if not mask.any():
         return
     for key, value in values.items():
+        if value.dtype == object:        # per-env nested infos (a dict, None where absent), nested as SyncVectorEnv does
+            present = mask & np.array([v is not None for v in value])
+            if present.any():
+                infos[key], infos[f"_{key}"] = _nested(value, present), present
+            continue
         rows = mask.reshape(mask.shape + (1,) * (np.ndim(value) - 1))      # per-env vectors: mask each row
         infos[key] = np.where(rows, value, np.zeros((), dtype=value.dtype))
         infos[f"_{key}"] = mask.copy()
+
+
+def _nested(value: np.ndarray, present: np.ndarray) -> dict[str, np.ndarray]:
+    """The dicts of the ``present`` envs as one dict of per-env arrays (zeros elsewhere) with ``_key`` masks."""
+    rows = np.flatnonzero(present)
+    out: dict[str, np.ndarray] = {}
+    for key, first in value[rows[0]].items():
+        column = np.zeros(len(value), dtype=type(first))
+        column[rows] = [value[i][key] for i in rows]
+        out[key], out[f"_{key}"] = column, present.copy()
+    return out
 
 
 def _row(obs: Any, i: int) -> Any:
