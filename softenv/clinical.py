@@ -15,7 +15,8 @@ Smoothness (of the hand's speed, sampled at the control rate ``fs``):
   ``-ln(T^3 / v_peak^2 * integral (d^2 v / dt^2)^2 dt)`` over the movement's duration ``T``. A
   minimum-jerk movement scores ``-ln(720 / 1.875^2) = -5.32``; less smooth movements lower it.
 
-Both are NaN for a hand that never moved (smoothness is undefined there, not perfect).
+Both are NaN for a hand that never moved or fewer than 3 speed samples (the start and 2 steps):
+smoothness is undefined there, not perfect.
 
 The glottic-view proxy (a POGO-like percentage of glottic opening). In the sagittal plane ``y = 0``
 (``+x`` toward the mouth, ``+z`` up; the tongue's rest centre at the origin, radius ``R``), the
@@ -46,7 +47,7 @@ GLOTTIS_Z = (0.2, 0.9)                  # its lower and upper ends (radii)
 def sparc(speed: np.ndarray, fs: float, padlevel: int = 4, fc: float = 10.0, amp_th: float = 0.05) -> float:
     """Spectral arc length of a speed profile sampled at ``fs`` Hz (see the module docstring)."""
     v = np.asarray(speed, dtype=np.float64).reshape(-1)
-    if v.size < 2 or not np.any(v):
+    if v.size < 3 or not np.any(v):
         return math.nan
     nfft = int(2 ** (math.ceil(math.log2(v.size)) + padlevel))
     f = np.arange(nfft) * (fs / nfft)

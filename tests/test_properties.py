@@ -102,7 +102,12 @@ def _check_rollout(env_id: str, sections: dict, steps: list[list[float]], seed: 
         assert space.contains(obs), (obs, space)
         assert all(space.contains(row) for row in obs_b)
         assert math.isfinite(reward) and np.isfinite(rewards).all()
-        assert all(np.isfinite(v).all() for v in info.values())
+        assert all(np.isfinite(v).all() for k, v in info.items() if k != "clinical")
+        if "clinical" in info:               # smoothness is NaN (undefined) only for a still hand or 1 step
+            m = info["clinical"]
+            assert all(math.isfinite(v) for k, v in m.items() if k not in ("sparc", "ldlj"))
+            defined = m["hand_path_m"] > 0.0 and m["duration_s"] > 1.5 * single.unwrapped.world.config["dynamics"]["dt"]
+            assert all(math.isfinite(m[k]) == defined for k in ("sparc", "ldlj")), m
         np.testing.assert_array_equal(obs_b[0], obs)
         assert rewards[0] == reward and terminated_b[0] == terminated
         if terminated or truncated:

@@ -106,7 +106,8 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     ``tongue_force_N`` (contact force on the tongue, N), ``incisor_force_N`` (mean over the control
     period, N), ``haptic_force_N`` (``(3,)``, world x, y, z: the force the ``device.haptic_preset``
     device would render to the hand, N), ``blade_pose`` (``(4,)``: x, z (m), pitch (rad), lateral y
-    (m) of the blade's centre of mass; the tongue's centre is the origin).
+    (m) of the blade's centre of mass; the tongue's centre is the origin). At an episode's last step
+    (success or the horizon): ``clinical``, the episode's clinical metrics (:mod:`softenv.clinical`).
 
     ## Arguments
 
