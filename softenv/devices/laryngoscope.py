@@ -48,8 +48,8 @@ analytic damped oscillator); heavier damping is stable but less accurate at the 
 Time stepping. The physics substep is ``h = dt / n`` with ``n`` the smallest count that keeps
 ``h <= max_substep`` (1 ms: a 1 kHz haptic rate) and ``omega_max h <= 0.3`` (accuracy; explicit
 springs are stable up to ``omega h < 2``), where ``omega_max`` is the stiffest mode of the blade with
-all its springs (coupling, rotary coupling, and the tongue contact at the design force's stiffness,
-wherever on the underside it acts), or of the lateral sweep (:meth:`LaryngoscopeParams.omega_max`).
+all its springs (coupling, rotary coupling, and the tongue contact's explicit part wherever on the
+underside it acts: the design force's stiffness, capped where it would add substeps), or of the lateral sweep (:meth:`LaryngoscopeParams.omega_max`).
 
 Two implementations share the arithmetic (:func:`_normal_force`, :func:`_lateral_step`): :class:`Laryngoscope` steps one
 device with Python floats and pymunk's attributes (the single env: a 1 kHz tick in microseconds),

@@ -30,6 +30,11 @@ def device_parts(world: World) -> tuple[LaryngoscopeParams, TongueContact]:
     return LaryngoscopeParams.from_config(world.config), contact
 
 
+def glottic_view(world: World, b: np.ndarray) -> float:
+    """The glottic-view proxy (%) of one env's shape ``b`` (:func:`softenv.clinical.glottic_view`)."""
+    return clinical.glottic_view(clinical.sagittal_profile(world.vertices(b), world.scene.mesh.triangles), 1.0)
+
+
 class SoftSphereHapticEnv(SoftSphereEnv):
     """
     ## Description
@@ -149,9 +154,7 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     def clinical_summary(self) -> dict[str, float]:
         """The episode's clinical metrics so far (:mod:`softenv.clinical`); in ``info["clinical"]`` at
         its last step."""
-        w = self.world
-        view = clinical.glottic_view(clinical.sagittal_profile(w.vertices(self._b), w.scene.mesh.triangles), 1.0)
-        return self.clinical.summary(0, view)
+        return self.clinical.summary(0, glottic_view(self.world, self._b))
 
     def _actuate(self, a: list[float]) -> tuple[list[float], float, float]:
         dev = self.laryngoscope
@@ -237,9 +240,7 @@ class SoftSphereHapticVectorEnv(SoftSphereVectorEnv):
 
     def clinical_summary(self, i: int) -> dict[str, float]:
         """Env ``i``'s episode so far (see :meth:`SoftSphereHapticEnv.clinical_summary`)."""
-        w = self.world
-        view = clinical.glottic_view(clinical.sagittal_profile(w.vertices(self._b[i]), w.scene.mesh.triangles), 1.0)
-        return self.clinical.summary(i, view)
+        return self.clinical.summary(i, glottic_view(self.world, self._b[i]))
 
     def _actuate(self, a: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dev, scene = self.laryngoscopes, self.world.scene
