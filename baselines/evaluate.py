@@ -10,7 +10,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from softenv.envs import ENV_SCENES
+from softenv.envs import ENV_SCENES, HAPTIC_SCENES
 
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
 
@@ -22,6 +22,8 @@ SCENES: dict[str, tuple[str, dict[str, Any]]] = {
     "SoftSphereViscoelastic-v0/stiffening": ("SoftSphereViscoelastic-v0", {"tissue": {"law": "stiffening"}}),
     "SoftSphereProcedure-v0": ("SoftSphereProcedure-v0", {}),
     "SoftSphereProcedure-v0/stiffening": ("SoftSphereProcedure-v0", {"tissue": {"law": "stiffening"}}),
+    "SoftSphereHaptic-v0": ("SoftSphereHaptic-v0", {}),
+    "SoftSphereHapticProcedure-v0": ("SoftSphereHapticProcedure-v0", {}),
 }
 
 
@@ -30,7 +32,7 @@ def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, A
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
     env_id, overrides = SCENES[scene]
-    kwargs = {**ENV_SCENES[env_id], **overrides}
+    kwargs = {**{**ENV_SCENES, **HAPTIC_SCENES}[env_id], **overrides}
     kwargs["task"] = {**kwargs.get("task", {}), "split": "test"}
     return env_id, {**kwargs, "obs_mode": obs_mode}
 

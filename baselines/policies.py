@@ -1,8 +1,7 @@
 """Baseline policies for SoftSphere: one small interface, ``predict(obs) -> action``.
 
-Every policy reads the env's vector observation (one ``(2k + 8,)`` row or a batch ``(N, 2k + 8)``)
-and returns actions in ``[-1, 1]^4`` of the same batch shape. The paper's regressors give two
-families of policies:
+Every policy reads the env's vector observation (one row or a batch) and returns actions in
+``[-1, 1]^4`` of the same batch shape. The paper's regressors give two families of policies:
 
 * ``invert-<model>``: the regressor learns the forward map force -> ``b`` on the scene's workspace
   data; the policy inverts it for the observed target ``b*`` by projected Levenberg-Marquardt over
@@ -14,6 +13,14 @@ families of policies:
 
 ``zero`` applies no force; ``random`` samples the action box. SB3 agents fit behind the same
 interface through :class:`SB3Policy`.
+
+On the laryngoscope scenes (``device.kind = "laryngoscope"``) the action moves a hand, not the
+force: there every force-giving policy above hands its force (the paper's haptic link used in
+reverse: target ``b*`` -> force) to :class:`softenv.control.HandController`, which realises it
+through the blade by the textbook sequence (insert, lift along the handle, sweep). ``expert`` is
+that controller on the exact response's inversion: the scripted expert, a clinician who knows
+which force gives which shape. ``oracle`` stays the ideal device's (a planning oracle for the
+device is open work), so it is not offered there.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from softenv.control import HandController
 from softenv.envs.world import World
 from softenv.response import ResponseModel, make_response
 
@@ -42,13 +50,16 @@ class Policy(Protocol):
 
 
 class _RowPolicy:
-    """Shared plumbing: batch handling, observation slicing, previous-action memory per row."""
+    """Shared plumbing: batch handling, observation slicing, previous-force memory per row, and the
+    hand controller on laryngoscope scenes (see the module docstring)."""
 
     name = "policy"
 
     def __init__(self, world: World) -> None:
         self.world = world
         self.k = world.k
+        self.device = world.config["device"]["kind"] == "laryngoscope"
+        self.controller = HandController(world.config) if self.device else None
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -58,9 +69,9 @@ class _RowPolicy:
         obs = np.asarray(obs, dtype=np.float64)
         single = obs.ndim == 1
         rows = obs[None] if single else obs
-        if rows.shape[1] != 2 * self.k + 8:
-            raise ValueError(f"{self.name}: observation rows have {rows.shape[1]} entries; this scene's vector "
-                             f"observation has 2k + 8 = {2 * self.k + 8} (k = {self.k})")
+        if rows.ndim != 2 or rows.shape[1] != self.world.obs_size:
+            raise ValueError(f"{self.name}: observation rows have {rows.shape[-1]} entries; this scene's vector "
+                             f"observation has {self.world.obs_size} (k = {self.k})")
         actions = self._act(rows)
         return (actions[0] if single else actions).astype(np.float32)
 
@@ -68,6 +79,20 @@ class _RowPolicy:
         return rows[:, self.k:2 * self.k] * self.world.sqrt_variance
 
     def _act(self, rows: np.ndarray) -> np.ndarray:
+        if not self.device:                        # the ideal device: the action is the force
+            return self._force(rows, rows[:, -4:].copy())
+        rest = self.world.device.rest_action.astype(np.float64)
+        if self._previous is None or len(self._previous) != len(rows):
+            self._previous = np.repeat(rest[None], len(rows), axis=0)
+        # an episode's first decision (hand at the start, no action yet): forget the last episode's force
+        end = 2 * self.k + self.world.device_obs_size
+        fresh = ~np.any(rows[:, -4:], axis=1) & ~np.any(rows[:, end - 7:end - 3], axis=1)
+        self._previous[fresh] = rest
+        self._previous = force = self._force(rows, self._previous)
+        return self.controller.act(rows[:, 2 * self.k:end], self.world.device.features(force))
+
+    def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        """The force (ideal device's action units) that should reach each row's target."""
         raise NotImplementedError
 
 
@@ -77,6 +102,8 @@ class ZeroPolicy(_RowPolicy):
     name = "zero"
 
     def _act(self, rows: np.ndarray) -> np.ndarray:
+        if self.device:                            # the hand holds still: the blade never reaches the tongue
+            return np.zeros((len(rows), 4))
         return np.repeat(self.world.device.rest_action[None].astype(np.float64), len(rows), axis=0)
 
 
@@ -111,10 +138,9 @@ class InversionPolicy(_RowPolicy):
         self.starts = np.asarray(starts, dtype=np.float64)
         self.eps = 1e-4
 
-    def _act(self, rows: np.ndarray) -> np.ndarray:
-        # warm start from the previous action (in the observation); the other starts only on an
-        # episode's first decision, when the previous action is the device's rest command
-        previous = rows[:, -4:].copy()
+    def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        # warm start from the previous force; the other starts only on an episode's first decision,
+        # when the previous force is the device's rest command
         first = np.flatnonzero(np.all(previous == self.world.device.rest_action, axis=1))
         owners = np.concatenate([np.arange(len(rows)), np.repeat(first, len(self.starts))])
         a = np.concatenate([previous, np.tile(self.starts, (len(first), 1))])
@@ -163,7 +189,7 @@ class DirectInversePolicy(_RowPolicy):
         self.model = model
         self.name = name
 
-    def _act(self, rows: np.ndarray) -> np.ndarray:
+    def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
         features = self.model.predict(rows[:, self.k:self.k + 4])
         return np.clip(self.world.device.normalised(features), -1.0, 1.0)
 
@@ -188,8 +214,13 @@ class SB3Policy:
 # the paper's regressors as policy models. The MLP is the paper's 4-7-9-k net trained by L-BFGS:
 # Levenberg-Marquardt needs ~160 s for 50 epochs on the 1024 x k workspace data (Jacobian 28,672 x 387).
 POLICY_MODELS = ("poly1", "poly2", "poly3", "anfis", "mlp")
-BASELINES = ("zero", "random", "oracle", *(f"invert-{m}" for m in POLICY_MODELS),
+BASELINES = ("zero", "random", "oracle", "expert", *(f"invert-{m}" for m in POLICY_MODELS),
              *(f"direct-{m}" for m in POLICY_MODELS))
+
+
+def applies(name: str, device_kind: str) -> bool:
+    """Whether a baseline exists for a device: ``oracle`` on the ideal device, ``expert`` on the laryngoscope."""
+    return not ((name == "oracle" and device_kind == "laryngoscope") or (name == "expert" and device_kind == "ideal"))
 
 
 def policy_model(name: str, seed: int) -> ResponseModel:
@@ -209,8 +240,11 @@ def make_baseline(name: str, world: World, seed: int = 0) -> Policy:
         return ZeroPolicy(world)
     if name == "random":
         return RandomPolicy(world, seed)
-    if name == "oracle":
-        return InversionPolicy(world, world.response, "oracle")
+    if name in ("oracle", "expert"):
+        if not applies(name, world.device_kind):
+            other = "expert" if name == "oracle" else "oracle"
+            raise ValueError(f"policy {name!r} does not apply to device.kind={world.device_kind!r}; use {other!r}")
+        return InversionPolicy(world, world.response, name)
     family, _, model_name = name.partition("-")
     if family not in ("invert", "direct") or model_name not in POLICY_MODELS:
         raise ValueError(f"unknown policy {name!r}; valid baselines: {list(BASELINES)}")

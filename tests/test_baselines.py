@@ -8,7 +8,8 @@ import pytest
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
 from baselines.benchmark import Plan, run
 from baselines.evaluate import bootstrap_ci, evaluate, iqm, scene_kwargs
-from baselines.policies import BASELINES, InversionPolicy, make_baseline
+from baselines.policies import BASELINES, InversionPolicy, applies, make_baseline
+from softenv.control import HandController
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 
@@ -16,6 +17,13 @@ from softenv.envs.world import World
 @pytest.fixture(scope="module")
 def world() -> World:
     kwargs = scene_kwargs("SoftSphere-v0")[1]
+    kwargs.pop("obs_mode")
+    return World(make_config(**kwargs))
+
+
+@pytest.fixture(scope="module")
+def haptic_world() -> World:
+    kwargs = scene_kwargs("SoftSphereHaptic-v0")[1]
     kwargs.pop("obs_mode")
     return World(make_config(**kwargs))
 
@@ -118,7 +126,41 @@ def test_every_baseline_acts_within_the_box(world):
     obs = np.random.default_rng(0).uniform(-1, 1, (3, 2 * world.k + 8)).astype(np.float32)
     obs[:, -4:] = world.device.rest_action
     for name in BASELINES:
-        if name.endswith("mlp"):
+        if name.endswith("mlp") or not applies(name, "ideal"):
             continue                                   # slow to train; the compare test runs direct-poly3 end to end
         actions = make_baseline(name, world).predict(obs)
         assert actions.shape == (3, 4) and np.all(np.abs(actions) <= 1.0)
+
+
+def test_hand_controller_realises_the_target_force_through_the_laryngoscope():
+    """The force the controller is asked for arises in the tongue: after the lift and sweep the normal
+    and sideways forces hold the target's within 2 % and 5 %, no force reaches the incisors, and the
+    shape is the target's (success)."""
+    import gymnasium as gym
+
+    env = gym.make("SoftSphereHaptic-v0").unwrapped
+    world = env.world
+    controller = HandController(world.config)
+    target = (world.family.low + world.family.high) / 2
+    obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
+    device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
+    incisor = []
+    for _ in range(150):
+        obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
+        incisor.append(info["incisor_force_N"])
+    assert env.laryngoscope.normal_force == pytest.approx(target[2], rel=0.02)
+    assert env.laryngoscope.sideways_force == pytest.approx(target[3], rel=0.05)
+    assert max(incisor) == 0.0 and info["is_success"]
+
+
+def test_baselines_on_the_laryngoscope_rank_as_expected(haptic_world):
+    """The scripted expert reaches most test targets through the device; a regressor's force helps less,
+    no motion scores 0; the ideal device's oracle is not offered on the device (and vice versa)."""
+    scores = {name: evaluate(make_baseline(name, haptic_world), "SoftSphereHaptic-v0", episodes=10)
+              for name in ("zero", "expert", "invert-poly2")}
+    assert scores["expert"].values["success"].mean() >= 0.8
+    assert scores["expert"].values["normalized_score"].mean() > 80
+    np.testing.assert_allclose(scores["zero"].values["normalized_score"], 0.0, atol=1e-9)
+    assert 20 < scores["invert-poly2"].values["normalized_score"].mean() < scores["expert"].values["normalized_score"].mean()
+    with pytest.raises(ValueError, match="'oracle' does not apply to device.kind='laryngoscope'"):
+        make_baseline("oracle", haptic_world)
