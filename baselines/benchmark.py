@@ -1,9 +1,11 @@
 """``softenv compare``: every baseline and agent on the benchmark's scenes, as a table with 95 %
 bootstrap intervals, a CSV, an error-against-decision-time plot, learning curves and a gallery.
 
-Quick mode (``--quick``): SoftSphere-v0 only, every baseline, and the four agents trained briefly
-in this run, one seed each (budgets printed); minutes on two cores. Full mode: the six scenes, every baseline, the
-four agents with their YAML budgets over 5 training seeds on SoftSphere-v0 and 3 elsewhere.
+Quick mode (``--quick``): every baseline on SoftSphere-v0 and on SoftSphereHaptic-v0 (the
+laryngoscope), and the four agents trained briefly in this run on SoftSphere-v0, one seed each
+(budgets printed); under 3 minutes on two cores. Full mode: the eight scenes (six ideal-device, two
+laryngoscope), every baseline that applies to the scene's device, the four agents with their YAML
+budgets over 5 training seeds on SoftSphere-v0 and SoftSphereHaptic-v0 and 3 elsewhere.
 """
 
 from __future__ import annotations
@@ -24,8 +26,8 @@ from softenv.envs.world import World
 from softenv.parallel import Job, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
-from .evaluate import METRICS, SCENES, Episodes, evaluate, scene_kwargs
-from .policies import BASELINES, make_baseline
+from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, scene_kwargs
+from .policies import BASELINES, applies, make_baseline
 
 
 @dataclass
@@ -38,13 +40,24 @@ class Plan:
     episodes: int = 100
 
 
+QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
+FIVE_SEEDS = ("SoftSphere-v0", "SoftSphereHaptic-v0")
+
+
 def quick_plan() -> Plan:
-    return Plan(["SoftSphere-v0"], list(BASELINES), list(ALGOS), {"SoftSphere-v0": 1},
-                {"ppo": 100_000, "sac": 20_000, "td3": 20_000, "sac-her": 20_000})
+    """Every baseline on one ideal and one laryngoscope scene; agents (briefly) on the ideal one only."""
+    return Plan(list(QUICK_SCENES), list(BASELINES), list(ALGOS), {"SoftSphere-v0": 1, "SoftSphereHaptic-v0": 0},
+                {"ppo": 50_000, "sac": 10_000, "td3": 10_000, "sac-her": 10_000})
 
 
 def full_plan() -> Plan:
-    return Plan(list(SCENES), list(BASELINES), list(ALGOS), {s: 5 if s == "SoftSphere-v0" else 3 for s in SCENES})
+    return Plan(list(SCENES), list(BASELINES), list(ALGOS), {s: 5 if s in FIVE_SEEDS else 3 for s in SCENES})
+
+
+def scene_baselines(plan: Plan, scene: str) -> list[str]:
+    """The plan's baselines that exist for the scene's device (``oracle`` ideal, ``expert`` laryngoscope)."""
+    kind = device_kind(scene)
+    return [name for name in plan.baselines if applies(name, kind)]
 
 
 def check_names(plan: Plan) -> None:
@@ -60,17 +73,19 @@ def check_names(plan: Plan) -> None:
 
 
 def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
-    """The plan's independent jobs: one per (scene, baseline) and per (scene, agent, training seed)."""
-    out = []
+    """The plan's independent jobs: one per (scene, baseline) and per (scene, agent, training seed),
+    the long ones first (agents, then model inversions), so parallel workers finish together."""
+    out: list[Job] = []
     for scene in plan.scenes:
-        for name in plan.baselines:
+        for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents:
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
                 out.append(Job(f"{scene} {algo} seed {seed}", agent_job,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes)))
-    return out
+    expected = lambda job: 0 if job.fn is agent_job else 1 if job.args[0].startswith("invert-") else 2  # noqa: E731
+    return sorted(out, key=expected)
 
 
 def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
@@ -111,7 +126,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     failed = [r for r in results.values() if not r.ok]
     for scene in plan.scenes:
         env_id = scene_kwargs(scene)[0]
-        for name in plan.baselines:
+        for name in scene_baselines(plan, scene):
             r = results[f"{scene} {name}"]
             timings[r.key] = r.wall_s
             if r.ok:
@@ -124,7 +139,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
                 continue
             curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
             pooled = [e for e, _ in done]
-            values = {m: np.concatenate([e.values[m] for e in pooled]) for m in METRICS}
+            values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
             budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
             summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=len(done)))
@@ -132,6 +147,9 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     how = describe(executor, n_jobs)
     echo("")
     echo(format_table(summaries))
+    if any(CLINICAL[0] in s for s in summaries):
+        echo("")
+        echo(format_clinical(summaries))
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
         write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem)
@@ -172,6 +190,22 @@ def format_table(summaries: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+CLINICAL_HEADER = ["scene", "policy", "peak tongue force (N)", "tongue force-time (N s)", "peak incisor force (N)",
+                   "incisor contact (s)", "lever share", "hand path (m)", "SPARC", "LDLJ", "glottic view (%)"]
+
+
+def format_clinical(summaries: list[dict[str, Any]]) -> str:
+    """The clinical metrics (means [95 % interval]) of the cells that have them: the laryngoscope scenes."""
+    keys = ("peak_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N", "incisor_contact_s", "lever_share",
+            "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
+    digits = (1, 1, 2, 2, 2, 3, 2, 1, 1)
+    lines = ["| " + " | ".join(CLINICAL_HEADER) + " |", "|" + "---|" * len(CLINICAL_HEADER)]
+    for s in summaries:
+        if CLINICAL[0] in s:
+            lines.append("| " + " | ".join([s["scene"], s["policy"], *(_fmt(s[k], d) for k, d in zip(keys, digits))]) + " |")
+    return "\n".join(lines)
+
+
 def provenance(command: str) -> dict[str, Any]:
     import gymnasium
     import stable_baselines3
@@ -197,11 +231,12 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
     with open(out_dir / f"{stem}.csv", "w", newline="") as fh:
         fh.write(f"# made by: {command} ({prov['date']}; softenv {prov['softenv']}, sb3 {prov['stable_baselines3']})\n")
         writer = csv.writer(fh)
+        quantities = ("mean", "ci_low", "ci_high", "iqm")
         writer.writerow(["scene", "policy", "kind", "seeds", "episodes", "decision_us"] +
-                        [f"{m}_{q}" for m in METRICS for q in ("mean", "ci_low", "ci_high", "iqm")])
-        for s in summaries:
+                        [f"{m}_{q}" for m in (*METRICS, *CLINICAL) for q in quantities])
+        for s in summaries:       # clinical columns stay empty on the ideal-device scenes
             writer.writerow([s["scene"], s["policy"], s["kind"], s["seeds"], s["episodes"], f"{s['decision_us']:.1f}"] +
-                            [f"{s[m][q]:.6g}" for m in METRICS for q in ("mean", "ci_low", "ci_high", "iqm")])
+                            [f"{s[m][q]:.6g}" if m in s else "" for m in (*METRICS, *CLINICAL) for q in quantities])
     (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
                                                        "failed_jobs": {r.key: r.error for r in failed}},
                                                       indent=1, default=float))
@@ -216,6 +251,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 0 = zero force, 100 = exact "
           "oracle (episode's cumulative shape error). Decision time: one observation, median.\n",
           format_table(summaries), "",
+          *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
+             format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times), "
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
     if failed:
@@ -231,24 +268,44 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(plan.scenes), figsize=(4.2 * len(plan.scenes), 3.8), squeeze=False)
-    for ax, scene in zip(axes[0], plan.scenes):
+    # one panel per scene in a grid; every policy keeps its colour and marker across panels, and the
+    # names sit in one legend below the grid (point labels would overlap where policies agree)
+    fig, axes = _grid(plt, len(plan.scenes), legend_room=1.2)
+    names = list(dict.fromkeys(s["policy"] for s in summaries))
+    colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
+    markers = "osD^v<>ph*"
+    for ax, scene in zip(axes.flat, plan.scenes):
         for s in (s for s in summaries if s["scene"] == scene):
-            e = s["final_error_mm"]
+            e, i = s["final_error_mm"], names.index(s["policy"])
             ax.errorbar(max(s["decision_us"], 0.5), e["mean"], yerr=[[e["mean"] - e["ci_low"]], [e["ci_high"] - e["mean"]]],
-                        fmt="o" if s["kind"] == "baseline" else "s", ms=4, capsize=2)
-            ax.annotate(s["policy"], (max(s["decision_us"], 0.5), e["mean"]), fontsize=6, xytext=(3, 2),
-                        textcoords="offset points")
+                        fmt=markers[i % len(markers)], color=colours[i], ms=5, capsize=2, label=s["policy"])
         ax.set_xscale("log")
+        ax.set_yscale("log")
         ax.set_xlabel("decision time per step (us)")
         ax.set_ylabel("final shape error (mm)")
         ax.set_title(scene, fontsize=8)
-    fig.suptitle(f"error against decision time -- {command}", fontsize=7)
-    fig.tight_layout()
+    handles = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(6, max(len(handles), 1)), fontsize=7,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0.04 + 0.025 * (len(handles) // 6 + 1), 1, 0.97))
+    fig.suptitle(f"error against decision time (mean, 95 % interval) -- {command}", fontsize=7)
     fig.savefig(out_dir / _error_plot_name(stem), dpi=120)
     plt.close(fig)
     _learning_curves(plan, curves, out_dir / f"{stem}_learning_curves.png", command, plt)
     _gallery(out_dir / f"{stem}_gallery.png", command, plt)
+
+
+def _grid(plt: Any, panels: int, legend_room: float = 0.0) -> tuple[Any, np.ndarray]:
+    """A figure with one panel per scene, at most three a row; unused panels hidden."""
+    cols = min(3, panels)
+    rows = -(-panels // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.4 * cols, 3.4 * rows + legend_room), squeeze=False)
+    for ax in list(axes.flat)[panels:]:
+        ax.axis("off")
+    return fig, axes
 
 
 def _error_plot_name(stem: str) -> str:
@@ -257,8 +314,8 @@ def _error_plot_name(stem: str) -> str:
 
 def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], path: Path,
                      command: str, plt: Any) -> None:
-    fig, axes = plt.subplots(1, len(plan.scenes), figsize=(4.2 * len(plan.scenes), 3.4), squeeze=False)
-    for ax, scene in zip(axes[0], plan.scenes):
+    fig, axes = _grid(plt, len(plan.scenes))
+    for ax, scene in zip(axes.flat, plan.scenes):
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])
             if not runs:

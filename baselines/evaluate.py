@@ -13,6 +13,9 @@ import numpy as np
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES
 
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
+# the laryngoscope scenes' clinical metrics (softenv.clinical), from info["clinical"] at each episode's end
+CLINICAL = ("peak_tongue_force_N", "mean_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N",
+            "incisor_contact_s", "lever_share", "duration_s", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
 
 # benchmark scenes: name -> (env id, scene overrides); nonlinear variants where the law matters
 SCENES: dict[str, tuple[str, dict[str, Any]]] = {
@@ -37,6 +40,11 @@ def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, A
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
+def device_kind(scene: str) -> str:
+    """``"laryngoscope"`` for the SoftSphereHaptic scenes, ``"ideal"`` otherwise."""
+    return "laryngoscope" if scene_kwargs(scene)[0] in HAPTIC_SCENES else "ideal"
+
+
 @dataclass
 class Episodes:
     """Per-episode metrics of one policy on one scene."""
@@ -49,7 +57,7 @@ class Episodes:
     def summary(self, seed: int = 0) -> dict[str, Any]:
         out: dict[str, Any] = {"policy": self.policy, "scene": self.scene, "episodes": len(self.values["success"]),
                                "decision_us": self.decision_us}
-        for name in METRICS:
+        for name in (*METRICS, *(c for c in CLINICAL if c in self.values)):
             v = self.values[name].astype(np.float64)
             finite = v[np.isfinite(v)]
             mean, lo, hi = bootstrap_ci(finite, seed=seed)
@@ -79,11 +87,13 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000) -> 
             success_now = np.where(ended, fi["is_success"], success_now)
             for key in ("shape_error_mm", "is_success", "normalized_score", "peak_force_N"):
                 final.setdefault(key, np.zeros(episodes, dtype=fi[key].dtype))[ended] = fi[key][ended]
+            for key in CLINICAL if "clinical" in fi else ():
+                final.setdefault(key, np.full(episodes, np.nan))[ended] = fi["clinical"][key][ended]
         first_success = np.where(running & success_now & np.isnan(first_success), step, first_success)
         done |= ended
     values = {"final_error_mm": final["shape_error_mm"], "success": final["is_success"].astype(np.float64),
               "normalized_score": final["normalized_score"], "steps_to_success": first_success,
-              "peak_force_N": final["peak_force_N"]}
+              "peak_force_N": final["peak_force_N"], **{key: final[key] for key in CLINICAL if key in final}}
     return Episodes(getattr(policy, "name", str(policy)), scene, values, decision_latency_us(policy, obs))
 
 

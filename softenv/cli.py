@@ -114,6 +114,7 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
 def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
     from . import bench
+    from .parallel import usable_cores
 
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
@@ -124,7 +125,7 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
     plan = benchmark.quick_plan() if args.quick else benchmark.full_plan()
     if args.scenes:
         plan.scenes = args.scenes
-        plan.seeds = {s: plan.seeds.get(s, 5 if s == "SoftSphere-v0" else 3) for s in args.scenes}
+        plan.seeds = {s: plan.seeds.get(s, 5 if s in benchmark.FIVE_SEEDS else 3) for s in args.scenes}
     if args.policies is not None:
         plan.baselines = args.policies
     if args.agents is not None:
@@ -132,10 +133,12 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
     if args.episodes:
         plan.episodes = args.episodes
     if args.quick:
-        print(f"softenv compare --quick: SoftSphere-v0 test targets, {plan.episodes} episodes per policy; agents "
-              f"trained now for {plan.timesteps} env steps (1 seed) -- short budgets, not the full benchmark")
+        print(f"softenv compare --quick: {' and '.join(plan.scenes)} test targets, {plan.episodes} episodes per policy; "
+              f"agents trained now on SoftSphere-v0 for {plan.timesteps} env steps (1 seed) -- short budgets, not the "
+              "full benchmark")
     benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv),
-                  stem="benchmark_quick" if args.quick else "benchmark", executor=args.executor, n_jobs=args.jobs,
+                  stem="benchmark_quick" if args.quick else "benchmark", executor=args.executor,
+                  n_jobs=args.jobs if args.jobs is not None else usable_cores(),
                   retries=args.retries)
 
 
@@ -196,15 +199,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", nargs="+", help="run only these sections")
 
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
-    p.add_argument("--quick", action="store_true", help="SoftSphere-v0 only, short agent training (minutes)")
+    p.add_argument("--quick", action="store_true",
+                   help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
     p.add_argument("--scenes", nargs="+", help="benchmark scenes (default: all in full mode)")
     p.add_argument("--policies", nargs="*", help="baseline policies (default: all)")
     p.add_argument("--agents", nargs="*", help="SB3 agents: ppo sac td3 sac-her (default: quick ppo sac; full all)")
     p.add_argument("--episodes", type=int, help="test episodes per policy and scene (default 100)")
     p.add_argument("--out", default="results", help="report directory (default: results)")
     p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
-    p.add_argument("--jobs", type=int, default=1,
-                   help="worker processes (local) or CPUs of a new local Ray instance (default 1: in this process)")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="worker processes (local) or CPUs of a new local Ray instance (default: every usable core; "
+                        "1: in this process); results do not depend on it")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
     p.add_argument("--retries", type=int, default=1, help="re-runs of a failed job before it is reported (default 1)")

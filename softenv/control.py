@@ -9,7 +9,10 @@ way the textbook procedure is taught:
 1. **Insert** (blade clear of the tongue): bring the blade's pitch to the one whose underside touches
    the tongue at the target's insertion angle (the underside's point nearest the tongue's centre
    lies at ``90 deg + pitch`` from the front), move the hand sideways to the target's lateral offset,
-   and slide the blade ``insert_depth`` in along itself toward the vallecula.
+   and slide the blade ``insert_depth`` in along itself toward the vallecula. Tipping the blade up
+   turns its flange up into the incisors (it turns about the grip), so the blade tips up only once
+   it rests on the tongue; should the teeth still be touched, the controller stops tipping up and
+   lifts until they are clear.
 2. **Lift** along the handle (the handle stands at 90 degrees on the blade, so the press action
    moves the hand along it, into the tongue), with the wrist held (no pitch torque is added to
    level the blade: levering on the incisors is what the procedure avoids), until the tongue's
@@ -32,7 +35,7 @@ import numpy as np
 from .devices.laryngoscope import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
 
 # the device slice of the observation (softenv.devices.LARYNGOSCOPE_OBS)
-_BLADE_PITCH, _HAND_X, _HAND_PITCH, _HAND_Y, _NORMAL, _SIDEWAYS = 2, 8, 10, 11, 12, 13
+_BLADE_PITCH, _HAND_X, _HAND_PITCH, _HAND_Y, _NORMAL, _SIDEWAYS, _INCISOR = 2, 8, 10, 11, 12, 13, 14
 
 
 def unsquash(s: np.ndarray) -> np.ndarray:
@@ -70,13 +73,16 @@ class HandController:
         target = np.asarray(target, dtype=np.float64)
         blade_pitch = d[:, _BLADE_PITCH] * ANGLE_SCALE
         hand_x, hand_y = d[:, _HAND_X] * POSITION_SCALE, d[:, _HAND_Y] * LATERAL_SCALE
-        P, Q = d[:, _NORMAL] * self.max_normal, d[:, _SIDEWAYS] * self.max_sideways
+        P, Q, incisor = d[:, _NORMAL] * self.max_normal, d[:, _SIDEWAYS] * self.max_sideways, d[:, _INCISOR]
         pitch_goal = target[:, 0] / self.radius - math.pi / 2
         lateral_goal = self.radius * np.sin(np.clip(target[:, 1] / self.radius, -math.pi / 2, math.pi / 2))
         touching = P > 0.0
         a = np.zeros((len(d), 4))
         step = self.settle / self.dt
         # 1. insert: pitch (always held at the goal), lateral offset and depth while clear of the tongue
+        # tipping the blade up (about the grip) raises its flange toward the incisors: clear of the
+        # tongue it tips up no further than level; once it rests on the tongue, the press gives room
+        pitch_goal = np.where(touching, pitch_goal, np.maximum(pitch_goal, 0.0))
         a[:, 3] = (pitch_goal - blade_pitch) * step / self.pitch_rate
         a[:, 2] = np.where(touching, 0.0, (lateral_goal - hand_y) * step / self.sweep_speed)
         a[:, 0] = np.where(touching, 0.0, (hand_x + self.insert_depth) * step / self.speed)
@@ -86,4 +92,7 @@ class HandController:
         # 3. sweep to the target's sideways force once the lift holds
         sweeping = touching & (P >= self.sweep_share * target[:, 2])
         a[:, 2] = np.where(sweeping, self.k_q * (target[:, 3] - Q), a[:, 2])
+        # the teeth touched: stop tipping up, and lift until they are clear
+        a[:, 3] = np.where(incisor > 0.0, np.maximum(a[:, 3], 0.0), a[:, 3])
+        a[:, 1] = np.where(incisor > 0.0, np.maximum(a[:, 1], 0.3), a[:, 1])
         return np.clip(a, -1.0, 1.0)

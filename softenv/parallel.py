@@ -53,6 +53,14 @@ class JobResult:
         return self.error is None
 
 
+def usable_cores() -> int:
+    """Cores this process may run on (its affinity where the platform tells, else the CPU count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:                      # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
 def describe(executor: str, jobs: int) -> str:
     """How a run fans out, in words for reports."""
     if executor == "ray":

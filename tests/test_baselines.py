@@ -111,11 +111,21 @@ def test_training_resumes_from_its_last_checkpoint(tmp_path):
 
 
 def test_compare_writes_the_report_with_its_command(tmp_path):
-    plan = Plan(["SoftSphere-v0"], ["zero", "oracle", "direct-poly3"], [], {"SoftSphere-v0": 1}, episodes=10)
+    scenes = ["SoftSphere-v0", "SoftSphereHaptic-v0"]
+    plan = Plan(scenes, ["zero", "oracle", "expert", "direct-poly3"], [], {s: 1 for s in scenes}, episodes=6)
     summaries = run(plan, tmp_path, tmp_path / "runs", "softenv compare --test", echo=lambda s: None)
-    assert [s["policy"] for s in summaries] == ["zero", "oracle", "direct-poly3"]
+    assert [(s["scene"], s["policy"]) for s in summaries] == [
+        ("SoftSphere-v0", "zero"), ("SoftSphere-v0", "oracle"), ("SoftSphere-v0", "direct-poly3"),
+        ("SoftSphereHaptic-v0", "zero"), ("SoftSphereHaptic-v0", "expert"), ("SoftSphereHaptic-v0", "direct-poly3")]
     md = (tmp_path / "benchmark.md").read_text()
     assert "softenv compare --test" in md and "| SoftSphere-v0 | oracle |" in md
+    # the laryngoscope's clinical metrics: in their own table, and in the CSV (empty on the ideal scene)
+    expert = next(s for s in summaries if s["policy"] == "expert")
+    assert expert["peak_incisor_force_N"]["mean"] == 0.0 and expert["glottic_view_pct"]["mean"] > 19.0
+    assert "| SoftSphereHaptic-v0 | expert | 3" in md and "glottic view (%)" in md
+    rows = (tmp_path / "benchmark.csv").read_text().splitlines()
+    header, ideal = rows[1].split(","), rows[2].split(",")
+    assert ideal[header.index("glottic_view_pct_mean")] == "" and ideal[header.index("success_mean")] != ""
     csv_text = (tmp_path / "benchmark.csv").read_text()
     assert csv_text.startswith("# made by: softenv compare --test")
     for name in ("policy_error_vs_runtime.png", "benchmark_learning_curves.png", "benchmark_gallery.png"):
