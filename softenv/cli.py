@@ -151,9 +151,10 @@ def cmd_score(args: argparse.Namespace) -> None:
     report = score_file(args.trajectory, scene, args.out)
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
-    print(f"{args.trajectory}: score {report['score']:.1f}/100 (accuracy {report['accuracy']:.2f}, speed "
-          f"{report['speed']:.2f}, safety {report['safety']:.2f}, smoothness {report['smoothness']:.2f}); final error "
-          f"{m['final_error_mm']:.3f} mm, time to target {ttt}, peak force {m['peak_force_N']:.1f} N")
+    parts = ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"])
+    print(f"{args.trajectory} ({report['log']}): score {report['score']:.1f}/100 ({parts}); final error "
+          f"{m['final_error_mm']:.3f} mm, time to target {ttt}, peak tongue force {m['peak_force_N']:.1f} N"
+          + (f", peak incisor force {m['clinical']['peak_incisor_force_N']:.1f} N" if "clinical" in m else ""))
     if args.out:
         print(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png")
 
@@ -214,8 +215,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
     p.add_argument("--retries", type=int, default=1, help="re-runs of a failed job before it is reported (default 1)")
 
-    p = sub.add_parser("score", help="score a recorded trainee trajectory (CSV or NPZ) against the expert")
-    p.add_argument("trajectory", help="file with columns time_s, insertion_deg, lateral_deg, normal_N, sideways_N")
+    p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
+    p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "
+                                      "force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
     p.add_argument("--scene", choices=["quasi_static", "viscoelastic"], default="quasi_static")
     p.add_argument("--law", choices=["linear", "stiffening"], default="linear")
     p.add_argument("--out", help="write <name>_score.json, .md and .png here")

@@ -1,41 +1,37 @@
-"""Trainee scoring: replay a recorded device trajectory through a scene and score it against the
-expert reference.
+"""Trainee scoring: replay a recorded trajectory through a scene and score it against the expert.
 
-Trajectory schema (CSV with a header row, or ``.npz`` with one array per column plus
-``format_version = 1``):
+Two kinds of log (:mod:`softenv.logs`: schemas, files, checks): **hand poses**, as a haptic device
+records them, replayed through the simulated laryngoscope and tongue (SoftSphereHaptic-v0's scene);
+and **force commands**, replayed through the ideal device (SoftSphere-v0's). Every check runs before
+the replay. The target is the centre of the scene's laryngoscopy family (the same for every
+trainee); the expert is the scripted one (:mod:`softenv.trainee` for hand poses,
+:func:`expert_trajectory` for force commands).
 
-| column | unit | allowed |
-|---|---|---|
-| ``time_s`` | s | finite, >= 0, strictly increasing, at most 600 (``MAX_DURATION_S``) |
-| ``insertion_deg`` | deg | within the scene's ``device.insertion_deg`` |
-| ``lateral_deg`` | deg | within +- ``device.lateral_deg`` |
-| ``normal_N`` | N | within [0, ``device.max_normal_force``] |
-| ``sideways_N`` | N | within +- ``device.max_sideways_force`` |
+Score of a hand-pose log (0-100), written out in every report::
 
-Each row is a device command held until the next row (zero-order hold), sampled at the scene's
-control period ``dt``; the replay lasts until the last row's time. Files over 64 MB are refused
-before they are read, and every check runs before the replay. The target is the centre of the
-scene's laryngoscopy family (the same for every trainee). Errors name the row (1 = first data row)
-and the column.
+    score = 100 (0.3 accuracy + 0.15 speed + 0.15 safety + 0.15 teeth + 0.1 smoothness + 0.15 view)
+    accuracy   = clip(1 - final_error / rest_error, 0, 1)         rest_error: error with no force
+    speed      = clip(expert_time / time_to_target, 0, 1)        0 if the target is never reached
+    safety     = clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1)
+    teeth      = clip(1 - peak_incisor_force / INCISOR_LIMIT_N, 0, 1)    any force on the teeth costs
+    smoothness = clip(expert_sparc / sparc, 0, 1)                SPARC of the hand's speed (0 if undefined)
+    view       = clip((view - rest_view) / (expert_view - rest_view), 0, 1)   glottic-view proxy (%)
 
-Score (0-100), written out in every report::
+Score of a force-command log (no hand, no teeth)::
 
     score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness)
-    accuracy   = clip(1 - final_error / rest_error, 0, 1)        rest_error: error with no force
-    speed      = clip(expert_time / time_to_target, 0, 1)       0 if the target is never reached
-    safety     = clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1)
     smoothness = clip(expert_jerk / jerk, 0, 1)                 jerk: RMS third derivative of the force (N/s^3)
 
-``time_to_target``: first time the shape error falls under the scene's tolerance.
+``time_to_target``: first time the shape error falls under the scene's tolerance. ``INCISOR_LIMIT_N``
+= 10 N: in manikin studies experts load the upper incisors with a few newtons at most, novices with
+tens (peak forces of 20-60 N are reported); 10 N or more costs the whole term.
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import math
-import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -44,20 +40,28 @@ import numpy as np
 from ._artifact import atomic_write
 from ._validation import check_choice, check_real
 from .envs.config import make_config
+from .logs import FORCE_LOG, HAND_LOG, MAX_DURATION_S, check_limits, check_table, read_log, save_log
 
-COLUMNS = ("time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N")
+COLUMNS = FORCE_LOG.columns
 TRAJECTORY_VERSION = 1
-MAX_DURATION_S = 600.0          # ten minutes: any laryngoscopy attempt; longer logs are refused up front
-MAX_FILE_BYTES = 64 << 20
+INCISOR_LIMIT_N = 10.0
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
+HAND_WEIGHTS = {"accuracy": 0.3, "speed": 0.15, "safety": 0.15, "teeth": 0.15, "smoothness": 0.1, "view": 0.15}
 FORMULA = ("score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness); accuracy = clip(1 - final_error / "
            "rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) (0 if never reached); safety = "
            "clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1); smoothness = clip(expert_jerk / jerk, 0, 1)")
+HAND_FORMULA = ("score = 100 (0.3 accuracy + 0.15 speed + 0.15 safety + 0.15 teeth + 0.1 smoothness + 0.15 view); "
+                "accuracy = clip(1 - final_error / rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) "
+                "(0 if never reached); safety = clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1); "
+                f"teeth = clip(1 - peak_incisor_force / {INCISOR_LIMIT_N:g} N, 0, 1); smoothness = clip(expert_sparc / "
+                "sparc, 0, 1) (SPARC of the hand's speed; 0 if undefined); view = clip((view - rest_view) / "
+                "(expert_view - rest_view), 0, 1) (glottic-view proxy, %)")
 
 
 @dataclass
 class Replay:
-    """A trajectory replayed through a scene: per-step series and the summary metrics."""
+    """A trajectory replayed through a scene: per-step series and the summary metrics. ``clinical``
+    (:mod:`softenv.clinical`) and ``incisor_N`` exist for hand-pose logs only."""
 
     time_s: np.ndarray
     error_mm: np.ndarray
@@ -69,123 +73,30 @@ class Replay:
     mean_force_N: float
     force_time_integral_Ns: float
     jerk_rms: float
+    incisor_N: np.ndarray | None = None
+    clinical: dict[str, float] = field(default_factory=dict)
 
 
 def load_trajectory(path: str | Path) -> np.ndarray:
-    """Read and validate the schema; returns an ``(n, 5)`` float array in ``COLUMNS`` order. Every
-    problem is a ``ValueError`` naming the file (and the row and column where one applies)."""
-    path = Path(path)
-    name = repr(str(path))
-    if not path.exists():
-        raise ValueError(f"trajectory {name} does not exist")
-    if not path.is_file():
-        raise ValueError(f"trajectory {name} is not a file")
-    if path.suffix not in (".npz", ".csv"):
-        raise ValueError(f"trajectory {name}: unknown format {path.suffix!r}; use .csv or .npz")
-    if path.stat().st_size > MAX_FILE_BYTES:
-        raise ValueError(f"trajectory {name} has {path.stat().st_size:,} bytes; at most {MAX_FILE_BYTES:,} are read "
-                         f"(a {MAX_DURATION_S:g} s trajectory needs far less)")
-    try:
-        table = _read_npz(path, name) if path.suffix == ".npz" else _read_csv(path, name)
-    except (OSError, EOFError, zipfile.BadZipFile, UnicodeDecodeError, csv.Error) as exc:
-        raise ValueError(f"trajectory {name} cannot be read as {path.suffix[1:].upper()}: {exc}") from None
-    check_trajectory(table, f"trajectory {name}")
-    return table
-
-
-def _read_npz(path: Path, name: str) -> np.ndarray:
-    if not zipfile.is_zipfile(path):         # np.load would try it as a pickle and talk about that
-        raise ValueError(f"trajectory {name} cannot be read as NPZ: not a zip archive")
-    with np.load(path, allow_pickle=False) as data:
-        if "format_version" not in data:
-            raise ValueError(f"{name}: no format_version; this softenv reads format_version={TRAJECTORY_VERSION}")
-        try:
-            version = data["format_version"]
-        except ValueError as exc:
-            raise ValueError(f"{name}: format_version cannot be read without pickle: {exc}") from None
-        if version.shape != () or version.dtype.kind not in "iu" or int(version) != TRAJECTORY_VERSION:
-            raise ValueError(f"{name}: format_version={version.tolist()!r}; this softenv reads {TRAJECTORY_VERSION} "
-                             "(one integer)")
-        missing = [c for c in COLUMNS if c not in data]
-        if missing:
-            raise ValueError(f"{name}: missing columns {missing}; required: {list(COLUMNS)}")
-        columns = {}
-        for c in COLUMNS:
-            try:
-                column = data[c]
-            except ValueError as exc:         # an object array (pickle) or a damaged member
-                raise ValueError(f"{name}: column {c!r} cannot be read without pickle: {exc}") from None
-            if column.ndim != 1 or column.dtype.kind not in "iuf":
-                raise ValueError(f"{name}: column {c!r} must be a 1-D array of real numbers, got shape "
-                                 f"{column.shape} and dtype {column.dtype}")
-            columns[c] = column
-    lengths = {c: len(v) for c, v in columns.items()}
-    if len(set(lengths.values())) > 1:
-        raise ValueError(f"{name}: columns have unequal lengths {lengths}")
-    return np.stack([columns[c].astype(np.float64) for c in COLUMNS], axis=1)
-
-
-def _read_csv(path: Path, name: str) -> np.ndarray:
-    with open(path, newline="", encoding="utf-8") as fh:
-        rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
-    if not rows:
-        raise ValueError(f"{name} is empty; expected a header {list(COLUMNS)}")
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in COLUMNS if c not in header]
-    if missing:
-        raise ValueError(f"{name}: missing columns {missing}; header has {header}, required {list(COLUMNS)}")
-    index = [header.index(c) for c in COLUMNS]
-    table = np.empty((len(rows) - 1, len(COLUMNS)))
-    for i, row in enumerate(rows[1:], start=1):
-        for j, (col, k) in enumerate(zip(COLUMNS, index)):
-            try:
-                table[i - 1, j] = float(row[k])
-            except (ValueError, IndexError):
-                raise ValueError(f"{name}: row {i}, column {col!r}: {row[k] if k < len(row) else ''!r} "
-                                 "is not a number") from None
-    return table
+    """Read and check a force-command log; returns an ``(n, 5)`` float array in ``COLUMNS`` order."""
+    return read_log(path, FORCE_LOG)[1]
 
 
 def check_trajectory(table: Any, source: str = "trajectory") -> np.ndarray:
-    """The schema's rules on an in-memory table: ``(n, 5)`` real numbers in ``COLUMNS`` order, at
-    least 2 rows, finite, times from 0 strictly increasing, lasting at most ``MAX_DURATION_S``."""
-    table = np.asarray(table)
-    if table.ndim != 2 or table.shape[1] != len(COLUMNS) or table.dtype.kind not in "iuf":
-        raise ValueError(f"{source} must be a table of real numbers with {len(COLUMNS)} columns {list(COLUMNS)}, got "
-                         f"shape {table.shape} and dtype {table.dtype}")
-    if len(table) < 2:
-        raise ValueError(f"{source}: needs at least 2 rows, has {len(table)}")
-    bad = ~np.isfinite(table)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise ValueError(f"{source}: row {i + 1}, column {COLUMNS[j]!r} = {table[i, j]!r} is not finite")
-    t = table[:, 0]
-    if t[0] < 0 or (np.diff(t) <= 0).any():
-        i = 0 if t[0] < 0 else int(np.argmax(np.diff(t) <= 0)) + 1
-        raise ValueError(f"{source}: row {i + 1}, column 'time_s' = {t[i]!r}: times must be >= 0 and strictly "
-                         "increasing")
-    if t[-1] > MAX_DURATION_S:
-        raise ValueError(f"{source}: row {len(t)}, column 'time_s' = {t[-1]:g}: a trajectory lasts at most "
-                         f"{MAX_DURATION_S:g} s")
-    return table.astype(np.float64, copy=False)
+    """The force-command schema's shared rules on an in-memory table (:func:`softenv.logs.check_table`)."""
+    return check_table(table, FORCE_LOG, source)
 
 
 def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") -> None:
     dev = config["device"]
-    limits = {"insertion_deg": dev["insertion_deg"], "lateral_deg": (-dev["lateral_deg"], dev["lateral_deg"]),
-              "normal_N": (0.0, dev["max_normal_force"]),
-              "sideways_N": (-dev["max_sideways_force"], dev["max_sideways_force"])}
-    for j, col in enumerate(COLUMNS[1:], start=1):
-        lo, hi = limits[col]
-        out = (table[:, j] < lo) | (table[:, j] > hi)
-        if out.any():
-            i = int(np.argmax(out))
-            raise ValueError(f"{source}: row {i + 1}, column {col!r} = {table[i, j]:g} is outside the device range "
-                             f"[{lo:g}, {hi:g}]")
+    check_limits(table, FORCE_LOG, {
+        "insertion_deg": dev["insertion_deg"], "lateral_deg": (-dev["lateral_deg"], dev["lateral_deg"]),
+        "normal_N": (0.0, dev["max_normal_force"]),
+        "sideways_N": (-dev["max_sideways_force"], dev["max_sideways_force"])}, source)
 
 
 def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
-    """Replay a validated trajectory through a reach scene whose target is the family centre.
+    """Replay a validated force-command log through a reach scene whose target is the family centre.
 
     Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``.
     """
@@ -204,19 +115,98 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
     features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
     # ranges are checked above, so the clip only removes rounding at the box's faces
     actions = np.clip(world.device.normalised(features), -1.0, 1.0).astype(np.float32)
-    centre = world.device.normalised((world.family.low + world.family.high) / 2)
-    env.reset(seed=0, options={"target": centre})
+    env.reset(seed=0, options={"target": _family_centre(world)})
     error, force = np.empty(len(times)), np.empty(len(times))
     for i, a in enumerate(actions):
         _, _, _, _, info = env.step(a)
         error[i], force[i] = info["shape_error_mm"], info["force_N"]
-    ref = math.sqrt(max(float(np.sum((env._target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
-    reached = np.flatnonzero(error < world.tolerance * ref)
     applied = world.device.features(actions.astype(np.float64))[:, 2:]
     jerk = np.diff(applied, n=3, axis=0) / dt ** 3 if len(applied) > 3 else np.zeros((1, 2))
+    return _replay(env, times, error, force, float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))
+
+
+def _family_centre(world: Any) -> np.ndarray:
+    return world.device.normalised((world.family.low + world.family.high) / 2)
+
+
+def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, jerk_rms: float,
+            **extra: Any) -> Replay:
+    """The summary of a replayed episode (series in, metrics out)."""
+    world, dt = env.world, times[0]
+    ref = math.sqrt(max(float(np.sum((env._target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
+    reached = np.flatnonzero(error < world.tolerance * ref)
     return Replay(times, error, force, float(error[-1]), ref, float(times[reached[0]]) if reached.size else None,
-                  float(force.max()), float(force.mean()), float(force.sum() * dt),
-                  float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))
+                  float(force.max()), float(force.mean()), float(force.sum() * dt), jerk_rms, **extra)
+
+
+def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
+    """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
+    from .devices.laryngoscope import LaryngoscopeParams
+
+    p = LaryngoscopeParams.from_config(config)
+    low, high = p.hand_box
+    start = (*p.grip_start, 0.0, 0.0)
+    return {c: (lo - s, hi - s) for c, lo, hi, s in zip(HAND_LOG.columns[1:], low, high, start)}
+
+
+def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
+                 source: str = "trajectory") -> tuple[np.ndarray, np.ndarray]:
+    """Check a hand-pose log against the laryngoscope of ``scene`` and resample it at the control
+    period: returns the control times ``(K,)`` (s, ends of each period) and the poses ``(K + 1, 4)``
+    relative to the start. Errors name the row and column: a pose outside the hand's workspace, or a
+    move faster than the device's speed limits."""
+    from .devices.laryngoscope import LaryngoscopeParams, hand_action
+    from .trainee import haptic_config
+
+    table = check_table(table, HAND_LOG, source)
+    config = haptic_config(scene)
+    relative = table.copy()
+    relative[:, 0] -= table[0, 0]
+    relative[:, 1:] -= table[0, 1:]
+    check_limits(relative, HAND_LOG, hand_limits(config), source)
+    dt = config["dynamics"]["dt"]
+    steps = int(math.floor(relative[-1, 0] / dt + 1e-9))
+    if steps < 1:
+        raise ValueError(f"{source}: row {len(table)}, column 'time_s': the log lasts {relative[-1, 0]:g} s, shorter "
+                         f"than one control period ({dt:g} s)")
+    times = np.arange(steps + 1) * dt
+    poses = np.column_stack([np.interp(times, relative[:, 0], relative[:, j]) for j in range(1, 5)])
+    p = LaryngoscopeParams.from_config(config)
+    names = ("hand_x_m / hand_z_m (along the blade)", "hand_x_m / hand_z_m (across the blade)", "hand_y_m",
+             "hand_pitch_rad")
+    limits = (p.max_hand_speed, p.max_hand_speed, p.max_sweep_speed, p.max_pitch_rate)
+    for k in range(steps):
+        v = (poses[k + 1] - poses[k]) / dt
+        a = hand_action(v[0], v[1], v[2], v[3], poses[k, 2], p)
+        worst = int(np.argmax(np.abs(a)))
+        if abs(a[worst]) > 1.0 + 1e-6:
+            row = int(np.searchsorted(relative[:, 0], times[k + 1] - 1e-12)) + 1
+            raise ValueError(f"{source}: row {row}, column {names[worst]!r}: the hand moves at "
+                             f"{abs(a[worst]) * limits[worst]:.3g} {'rad/s' if worst == 3 else 'm/s'} near "
+                             f"time_s = {table[0, 0] + times[k + 1]:g}; the device allows [0, {limits[worst]:g}]")
+    return times[1:], poses
+
+
+def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory") -> Replay:
+    """Replay a hand-pose log through the laryngoscope and tongue (SoftSphereHaptic-v0's scene with
+    ``scene``'s sections) toward the family centre: each control period the hand is commanded the
+    velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
+    accumulates)."""
+    from .devices.laryngoscope import hand_action
+    from .trainee import haptic_env, relative_hand_pose
+
+    times, poses = hand_actions(table, scene, source)
+    env = haptic_env(scene, len(times))
+    world, p, dt = env.world, env.laryngoscope.params, times[0]
+    env.reset(seed=0, options={"target": _family_centre(world)})
+    error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
+    for k in range(len(times)):
+        now = relative_hand_pose(env)
+        v = (poses[k + 1] - now) / dt
+        a = np.clip(hand_action(v[0], v[1], v[2], v[3], now[2], p), -1.0, 1.0)    # the clip removes rounding only
+        _, _, _, _, info = env.step(a.astype(np.float32))
+        error[k], force[k], incisor[k] = info["shape_error_mm"], info["tongue_force_N"], info["incisor_force_N"]
+    return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"])
 
 
 def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5.0, style: str = "expert") -> np.ndarray:
@@ -251,46 +241,72 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
 
 
 def save_trajectory(table: np.ndarray, path: str | Path, note: str = "") -> None:
-    """Write a trajectory as CSV (checked first; written atomically: a failed write leaves no short file)."""
-    table = check_trajectory(table)
-
-    def write(fh: Any) -> None:
-        if note:
-            fh.write(f"# {note}\n")
-        writer = csv.writer(fh)
-        writer.writerow(COLUMNS)
-        for row in table:
-            writer.writerow([f"{v:.6g}" for v in row])
-
-    atomic_write(path, write, text=True)
+    """Write a force-command log as CSV (:func:`softenv.logs.save_log`)."""
+    save_log(table, path, FORCE_LOG, note)
 
 
 def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float]:
-    parts = {
-        "accuracy": float(np.clip(1.0 - trainee.final_error_mm / trainee.rest_error_mm, 0.0, 1.0)),
-        "speed": 0.0 if trainee.time_to_target_s is None or expert.time_to_target_s is None
-        else float(np.clip(expert.time_to_target_s / trainee.time_to_target_s, 0.0, 1.0)),
-        "safety": float(np.clip(1.0 - max(trainee.peak_force_N - safe_force, 0.0) / safe_force, 0.0, 1.0)),
-        "smoothness": float(np.clip(expert.jerk_rms / max(trainee.jerk_rms, 1e-12), 0.0, 1.0)),
-    }
+    """The force-command score and its parts (see the module docstring)."""
+    parts = _common_parts(trainee, expert, safe_force)
+    parts["smoothness"] = float(np.clip(expert.jerk_rms / max(trainee.jerk_rms, 1e-12), 0.0, 1.0))
     parts["score"] = 100.0 * sum(WEIGHTS[k] * parts[k] for k in WEIGHTS)
     return parts
 
 
+def hand_score(trainee: Replay, expert: Replay, safe_force: float, rest_view: float) -> dict[str, float]:
+    """The hand-pose score and its parts (see the module docstring); ``rest_view``: the glottic view
+    (%) of the untouched tongue."""
+    parts = _common_parts(trainee, expert, safe_force)
+    c, e = trainee.clinical, expert.clinical
+    parts["teeth"] = float(np.clip(1.0 - c["peak_incisor_force_N"] / INCISOR_LIMIT_N, 0.0, 1.0))
+    parts["smoothness"] = 0.0 if not math.isfinite(c["sparc"]) else float(np.clip(e["sparc"] / c["sparc"], 0.0, 1.0))
+    gain = e["glottic_view_pct"] - rest_view
+    parts["view"] = float(np.clip((c["glottic_view_pct"] - rest_view) / gain, 0.0, 1.0)) if gain > 0 else 1.0
+    parts["score"] = 100.0 * sum(HAND_WEIGHTS[k] * parts[k] for k in HAND_WEIGHTS)
+    return parts
+
+
+def _common_parts(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float]:
+    return {
+        "accuracy": float(np.clip(1.0 - trainee.final_error_mm / trainee.rest_error_mm, 0.0, 1.0)),
+        "speed": 0.0 if trainee.time_to_target_s is None or expert.time_to_target_s is None
+        else float(np.clip(expert.time_to_target_s / trainee.time_to_target_s, 0.0, 1.0)),
+        "safety": float(np.clip(1.0 - max(trainee.peak_force_N - safe_force, 0.0) / safe_force, 0.0, 1.0)),
+    }
+
+
+def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory",
+                   expert: Replay | None = None) -> tuple[dict[str, float], Replay, Replay]:
+    """Score an in-memory hand-pose log; returns the parts, the trainee's and the expert's replays
+    (pass ``expert`` to reuse one replay over many logs)."""
+    from . import clinical
+    from .trainee import expert_hand_log, haptic_config
+
+    trainee = replay_hand(table, scene, source)
+    expert = expert or replay_hand(expert_hand_log(scene), scene, "the expert's log")
+    config = haptic_config(scene)
+    rest_view = clinical.rest_view_analytic()
+    return hand_score(trainee, expert, config["reward"]["safe_force"], rest_view), trainee, expert
+
+
 def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
-    """Score a trajectory file; with ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``.
-    Arguments and file are checked before any replay."""
+    """Score a log file (hand poses or force commands, by its columns); with ``out_dir``, write
+    ``<name>_score.json``, ``.md`` and ``.png``. Arguments and file are checked before any replay."""
     if out_dir is not None and Path(out_dir).exists() and not Path(out_dir).is_dir():
         raise ValueError(f"out directory {str(out_dir)!r} exists and is not a directory")
-    config = make_config(**(scene or {}))
-    table = load_trajectory(path)
-    check_ranges(table, config, f"trajectory {str(path)!r}")
-    trainee = replay(table, scene)
-    expert = replay(expert_trajectory(scene), scene)
-    parts = score(trainee, expert, config["reward"]["safe_force"])
-    summary = {k: v for k, v in asdict(trainee).items() if not isinstance(v, np.ndarray)}
-    report = {"trajectory": str(path), "scene": scene or {}, **parts, "metrics": summary,
-              "expert": {k: v for k, v in asdict(expert).items() if not isinstance(v, np.ndarray)}, "formula": FORMULA}
+    source = f"trajectory {str(path)!r}"
+    schema, table = read_log(path)
+    if schema is HAND_LOG:
+        hand_actions(table, scene, source)                     # every check before the replay
+        parts, trainee, expert = score_hand_log(table, scene, source)
+        formula, weights = HAND_FORMULA, HAND_WEIGHTS
+    else:
+        config = make_config(**(scene or {}))
+        check_ranges(table, config, source)
+        trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
+        parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
+    report = {"trajectory": str(path), "log": schema.name, "scene": scene or {}, **parts, "weights": weights,
+              "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
     if out_dir is not None:
         out = Path(out_dir)
         stem = Path(path).stem
@@ -300,18 +316,41 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
     return report
 
 
+def _summary(r: Replay) -> dict[str, Any]:
+    out = {k: v for k, v in asdict(r).items() if not isinstance(v, (np.ndarray, dict)) and v is not None
+           or k == "time_to_target_s"}
+    if math.isnan(out["jerk_rms"]):
+        del out["jerk_rms"]                                     # a hand log's smoothness is SPARC (clinical)
+    if r.clinical:
+        out["clinical"] = r.clinical
+    return out
+
+
 def _markdown(report: dict[str, Any]) -> str:
     m, e = report["metrics"], report["expert"]
     ttt = lambda v: "never" if v is None else f"{v:.2f} s"  # noqa: E731
     rows = [("final shape error", f"{m['final_error_mm']:.3f} mm", f"{e['final_error_mm']:.3f} mm"),
             ("time to target", ttt(m["time_to_target_s"]), ttt(e["time_to_target_s"])),
-            ("peak force", f"{m['peak_force_N']:.1f} N", f"{e['peak_force_N']:.1f} N"),
-            ("mean force", f"{m['mean_force_N']:.1f} N", f"{e['mean_force_N']:.1f} N"),
-            ("force-time integral", f"{m['force_time_integral_Ns']:.1f} N s", f"{e['force_time_integral_Ns']:.1f} N s"),
-            ("jerk (RMS)", f"{m['jerk_rms']:.3g} N/s^3", f"{e['jerk_rms']:.3g} N/s^3")]
-    lines = [f"# Trainee score: {report['score']:.1f} / 100\n", f"Trajectory `{report['trajectory']}`.\n",
-             "| metric | trainee | expert |", "|---|---|---|", *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
-             "| part | value |", "|---|---|", *[f"| {k} | {report[k]:.3f} |" for k in WEIGHTS], "",
+            ("peak tongue force", f"{m['peak_force_N']:.1f} N", f"{e['peak_force_N']:.1f} N"),
+            ("mean tongue force", f"{m['mean_force_N']:.1f} N", f"{e['mean_force_N']:.1f} N"),
+            ("force-time integral", f"{m['force_time_integral_Ns']:.1f} N s", f"{e['force_time_integral_Ns']:.1f} N s")]
+    if "jerk_rms" in m:
+        rows.append(("jerk (RMS)", f"{m['jerk_rms']:.3g} N/s^3", f"{e['jerk_rms']:.3g} N/s^3"))
+    if "clinical" in m:
+        mc, ec = m["clinical"], e["clinical"]
+        rows += [("peak incisor force", f"{mc['peak_incisor_force_N']:.2f} N", f"{ec['peak_incisor_force_N']:.2f} N"),
+                 ("incisor contact", f"{mc['incisor_contact_s']:.2f} s", f"{ec['incisor_contact_s']:.2f} s"),
+                 ("lever share (moments about the incisors)", f"{mc['lever_share']:.2f}", f"{ec['lever_share']:.2f}"),
+                 ("hand path", f"{mc['hand_path_m'] * 100:.1f} cm", f"{ec['hand_path_m'] * 100:.1f} cm"),
+                 ("SPARC (hand speed)", f"{mc['sparc']:.2f}", f"{ec['sparc']:.2f}"),
+                 ("LDLJ (hand speed)", f"{mc['ldlj']:.1f}", f"{ec['ldlj']:.1f}"),
+                 ("glottic view", f"{mc['glottic_view_pct']:.0f} %", f"{ec['glottic_view_pct']:.0f} %"),
+                 ("duration", f"{mc['duration_s']:.2f} s", f"{ec['duration_s']:.2f} s")]
+    lines = [f"# Trainee score: {report['score']:.1f} / 100\n", f"Trajectory `{report['trajectory']}` "
+             f"({report['log']}).\n", "| metric | trainee | expert |", "|---|---|---|",
+             *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
+             "| part | weight | value |", "|---|---|---|",
+             *[f"| {k} | {w:g} | {report[k]:.3f} |" for k, w in report["weights"].items()], "",
              f"Formula: {report['formula']}."]
     return "\n".join(lines) + "\n"
 
@@ -322,15 +361,15 @@ def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(6, 4.5), sharex=True)
-    ax1.plot(trainee.time_s, trainee.error_mm, label="trainee")
-    ax1.plot(expert.time_s, expert.error_mm, "--", label="expert")
-    ax1.set_ylabel("shape error (mm)")
-    ax1.legend(fontsize=7)
-    ax2.plot(trainee.time_s, trainee.force_N, label="trainee")
-    ax2.plot(expert.time_s, expert.force_N, "--", label="expert")
-    ax2.set_ylabel("force (N)")
-    ax2.set_xlabel("time (s)")
+    panels = 3 if trainee.incisor_N is not None else 2
+    fig, axes = plt.subplots(panels, 1, figsize=(6, 1.9 * panels + 0.8), sharex=True)
+    series = [("shape error (mm)", "error_mm"), ("tongue force (N)", "force_N"), ("incisor force (N)", "incisor_N")]
+    for ax, (label, key) in zip(axes, series):
+        ax.plot(trainee.time_s, getattr(trainee, key), label="trainee")
+        ax.plot(expert.time_s, getattr(expert, key), "--", label="expert")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=7)
+    axes[-1].set_xlabel("time (s)")
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))

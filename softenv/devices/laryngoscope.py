@@ -424,6 +424,16 @@ def _hand_command(action: Any, pitch: Any, p: LaryngoscopeParams, ops: Any) -> t
             p.max_pitch_rate * action[3], p.max_sweep_speed * action[2])
 
 
+def hand_action(vX: float, vY: float, spin: float, v_lateral: float, pitch: float,
+                p: LaryngoscopeParams) -> tuple[float, float, float, float]:
+    """The action whose :func:`_hand_command` at hand pitch ``pitch`` is the world velocity ``(vX, vY,
+    spin, v_lateral)`` (its exact inverse; not clipped to ``[-1, 1]``)."""
+    cos_a, sin_a = math.cos(pitch), math.sin(pitch)
+    v = p.max_hand_speed
+    return (-(vX * cos_a + vY * sin_a) / v, (vX * sin_a - vY * cos_a) / v, v_lateral / p.max_sweep_speed,
+            spin / p.max_pitch_rate)
+
+
 def _features(cx: Any, cy: Any, anchor: Any, P: Any, Q: Any, R: float, ops: Any) -> tuple[Any, Any, Any, Any]:
     """Force features of the contact: insertion and lateral arc (m), normal and sideways force (N)."""
     return R * ops.atan2(cy, cx), R * ops.asin(ops.clip(anchor / R, -1.0, 1.0)), P, Q

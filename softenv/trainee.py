@@ -1,0 +1,177 @@
+"""Synthetic trainees on the laryngoscope: the scripted expert's hand log and graded errors of technique.
+
+:func:`expert_hand_log` runs :class:`softenv.control.HandController` (insert, lift along the handle,
+sweep right) toward the scene's family-centre target and records the hand's pose every control
+period, as a haptic device would (the :data:`softenv.logs.HAND_LOG` schema). :func:`degrade` adds
+the errors a trainee makes, each by an amount that grades it (0 = none):
+
+| error | amount | what the hand does |
+|---|---|---|
+| ``tremor`` | mm | an 8 Hz tremor (physiological tremor is 8-12 Hz) of that amplitude in x and z, half of it sideways, and 0.01 rad per mm of pitch |
+| ``hesitation`` | s | three pauses of that length (at 25, 50 and 75 % of the expert's movement), the hand held still |
+| ``lever`` | rad | the handle rocked back (tip up) by that angle before the lift, which comes late (at 15-30 % of the procedure instead of at once): the flange levers on the incisors |
+| ``overshoot`` | mm | the lift pressed that much deeper than the expert's |
+| ``direction`` | 0-1 | the sideways path mirrored by that share (1: sweeps left instead of right) |
+
+Every degraded log starts at the start pose and stays in the hand's workspace (clipped to it); where
+an error would move the hand faster than the device allows, the hand lags behind (each step's move
+scaled down to the speed limit), as a real hand on the device would.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ._validation import check_real
+from .envs import HAPTIC_SCENES
+
+ERRORS = ("tremor", "hesitation", "lever", "overshoot", "direction")
+TREMOR_HZ = 8.0
+PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
+
+
+def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """SoftSphereHaptic-v0's config with ``scene``'s sections merged in."""
+    from .envs.config import scene_config
+
+    return scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], dict(scene or {}), "scene")
+
+
+def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
+    """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
+    from .envs.haptic import SoftSphereHapticEnv
+
+    scene = dict(scene or {})
+    scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
+    return SoftSphereHapticEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
+
+
+def relative_hand_pose(env: Any) -> np.ndarray:
+    """The hand's pose (x, z, pitch, y) relative to its start pose."""
+    gx, gy = env.laryngoscope.params.grip_start
+    x, z, pitch, y = env.laryngoscope.hand_pose
+    return np.array([x - gx, z - gy, pitch, y])
+
+
+def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0) -> np.ndarray:
+    """The scripted expert's hand log ``(n, 5)`` (``time_s`` and the relative hand pose) toward the
+    centre of the scene's laryngoscopy family."""
+    from .control import HandController
+
+    check_real(duration_s, "duration_s", 0.1, 600.0)
+    dt = haptic_config(scene)["dynamics"]["dt"]
+    steps = max(1, int(round(duration_s / dt)))
+    env = haptic_env(scene, steps)
+    world = env.world
+    target = (world.family.low + world.family.high) / 2
+    controller = HandController(world.config)
+    obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
+    device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
+    poses = [relative_hand_pose(env)]
+    for _ in range(steps):
+        obs, *_ = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
+        poses.append(relative_hand_pose(env))
+    return np.column_stack([np.arange(steps + 1) * dt, np.array(poses)])
+
+
+def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
+            lever: float = 0.0, overshoot: float = 0.0, direction: float = 0.0, seed: int = 0) -> np.ndarray:
+    """The hand log ``log`` with a trainee's errors (see the module docstring; amounts >= 0)."""
+    for name, value, high in (("tremor", tremor, 5.0), ("hesitation", hesitation, 60.0), ("lever", lever, 0.5),
+                              ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
+        check_real(value, name, 0.0, high)
+    log = np.array(log, dtype=np.float64)
+    t, pose = log[:, 0], log[:, 1:].copy()
+    duration = t[-1]
+    ramp = lambda a, b: 0.5 - 0.5 * np.cos(np.pi * np.clip((t / duration - a) / (b - a), 0.0, 1.0))  # noqa: E731
+    # lift: the expert's hand goes down (z) between leaving the start and 40 % of the procedure
+    pose[:, 3] *= 1.0 - 2.0 * direction
+    if lever > 0.0:
+        rocked = ramp(0.0, 0.12) - ramp(0.25, 0.35)
+        pose[:, 2] = pose[:, 2] * ramp(0.25, 0.35) - lever * rocked
+        pose[:, 1] *= 1.0 - min(1.0, lever / 0.1) * (1.0 - ramp(0.15, 0.3))
+    pose[:, 1] -= overshoot * 1e-3 * ramp(0.1, 0.4)
+    if tremor > 0.0:
+        phase = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, 4)
+        onset = np.clip(t / 0.25, 0.0, 1.0)                           # from rest, over a quarter second
+        shake = onset[:, None] * np.sin(2.0 * math.pi * TREMOR_HZ * t[:, None] + phase[None])
+        pose += tremor * 1e-3 * shake * np.array([1.0, 1.0, 10.0, 0.5])
+    if hesitation > 0.0:
+        moving = np.flatnonzero(np.any(np.abs(np.diff(log[:, 1:], axis=0)) > 1e-4, axis=1))   # faster than 5 mm/s
+        t, pose = _pause(t, pose, hesitation, (moving[0], moving[-1] + 1) if moving.size else (0, len(t) - 1))
+    low, high = _hand_limits(scene)
+    return np.column_stack([t, _speed_limited(np.clip(pose, low, high), float(t[1] - t[0]), scene)])
+
+
+def _speed_limited(pose: np.ndarray, dt: float, scene: dict[str, Any] | None) -> np.ndarray:
+    """The path a hand on the device follows: each step's move scaled down to the speed limits."""
+    from .devices.laryngoscope import LaryngoscopeParams, hand_action
+
+    p = LaryngoscopeParams.from_config(haptic_config(scene))
+    out = pose.copy()
+    for k in range(len(pose) - 1):
+        move = pose[k + 1] - out[k]
+        v = move / dt
+        excess = max(1.0, max(abs(a) for a in hand_action(v[0], v[1], v[2], v[3], out[k, 2], p)) * (1.0 + 1e-9))
+        out[k + 1] = out[k] + move / excess
+    return out
+
+
+def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Hold the hand still for ``pause`` seconds at each of :data:`PAUSES` of the rows ``movement``
+    (first, last) where the expert moves (the log grows longer)."""
+    dt = float(t[1] - t[0])
+    first, last = movement
+    stops = sorted(int(round(first + share * (last - first))) for share in PAUSES)
+    held = int(round(pause / dt))
+    rows = np.concatenate([np.arange(len(t))] + [np.full(held, s) for s in stops])
+    rows = np.sort(rows, kind="stable")
+    return np.arange(len(rows)) * dt, pose[rows]
+
+
+def _hand_limits(scene: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
+    """The hand's workspace relative to its start pose (x, z, pitch, y)."""
+    from .devices.laryngoscope import LaryngoscopeParams
+
+    p = LaryngoscopeParams.from_config(haptic_config(scene))
+    (lx, lz, lp, ly), (hx, hz, hp, hy) = p.hand_box
+    gx, gz = p.grip_start
+    return np.array([lx - gx, lz - gz, lp, ly]), np.array([hx - gx, hz - gz, hp, hy])
+
+
+# the largest amount of each error (skill level 4 of 4); each trainee draws 0.5-1.5 times its level's share
+WORST = {"tremor": 0.8, "hesitation": 0.4, "lever": 0.3, "overshoot": 6.0}
+# the score part each error lowers (softenv.scoring.HAND_WEIGHTS)
+LOWERS = {"tremor": "smoothness", "hesitation": "speed", "lever": "teeth", "overshoot": "safety", "direction": "accuracy"}
+
+
+def skill_population(expert_log: np.ndarray, levels: int = 5, per_level: int = 20, seed: int = 0,
+                     scene: dict[str, Any] | None = None) -> list[tuple[int, dict[str, float], np.ndarray]]:
+    """Trainees at graded skill: error level ``L`` of ``0 .. levels - 1`` (skill ``levels - 1 - L``) degrades the expert's log by every
+    error of :data:`WORST` at ``L / (levels - 1)`` of its worst amount, times a factor drawn from
+    [0.5, 1.5] per trainee and error (level 0 is the expert). Returns ``(level, amounts, log)``."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for level in range(levels):
+        for i in range(per_level):
+            share = level / max(levels - 1, 1)
+            amounts = {name: float(share * worst * rng.uniform(0.5, 1.5)) for name, worst in WORST.items()}
+            out.append((level, amounts, degrade(expert_log, scene, seed=int(rng.integers(1 << 31)), **amounts)))
+    return out
+
+
+def spearman(x: np.ndarray, y: np.ndarray) -> float:
+    """Spearman's rank correlation (ties get their average rank)."""
+    def ranks(v: np.ndarray) -> np.ndarray:
+        v = np.asarray(v, dtype=np.float64)
+        order = np.argsort(v, kind="stable")
+        r = np.empty(len(v))
+        r[order] = np.arange(len(v), dtype=np.float64)
+        for value in np.unique(v):                      # average rank over ties
+            tied = v == value
+            r[tied] = r[tied].mean()
+        return r
+    return float(np.corrcoef(ranks(x), ranks(y))[0, 1])
