@@ -26,8 +26,9 @@ from softenv.envs.world import World
 from softenv.parallel import Job, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
-from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, scene_kwargs
-from .policies import BASELINES, applies, make_baseline
+from .evaluate import (CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, ideal_counterpart,
+                       normalized_scores, scene_kwargs)
+from .policies import BASELINES, PlanningOracle, ZeroPolicy, applies, make_baseline
 
 
 @dataclass
@@ -77,6 +78,7 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
     the long ones first (agents, then model inversions), so parallel workers finish together."""
     out: list[Job] = []
     for scene in plan.scenes:
+        out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes)))
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents:
@@ -84,8 +86,21 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
                 out.append(Job(f"{scene} {algo} seed {seed}", agent_job,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes)))
-    expected = lambda job: 0 if job.fn is agent_job else 1 if job.args[0].startswith("invert-") else 2  # noqa: E731
+    expected = lambda job: 0 if job.fn is agent_job else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+        else 2  # noqa: E731
     return sorted(out, key=expected)
+
+
+def anchor_job(scene: str, episodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The normalized score's anchors on the scene's test targets: the summed shape error of no force
+    (0) and of the planning oracle (100), on the scene's ideal-device counterpart (on a laryngoscope
+    scene the oracle's force acts at once: a bound no device reaches)."""
+    _, kwargs = ideal_counterpart(scene)
+    kwargs.pop("obs_mode")
+    world = World(make_config(**kwargs))
+    zero = evaluate(ZeroPolicy(world), scene, episodes, ideal=True)
+    oracle = evaluate(PlanningOracle(world), scene, episodes, ideal=True)
+    return zero.values["error_sum_mm"], oracle.values["error_sum_mm"]
 
 
 def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
@@ -126,11 +141,16 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     failed = [r for r in results.values() if not r.ok]
     for scene in plan.scenes:
         env_id = scene_kwargs(scene)[0]
+        anchors = results[f"{scene} anchors"]
+        timings[anchors.key] = anchors.wall_s
+        if not anchors.ok:
+            continue
+        anchored = lambda e: _anchored(e, *anchors.value)  # noqa: E731
         for name in scene_baselines(plan, scene):
             r = results[f"{scene} {name}"]
             timings[r.key] = r.wall_s
             if r.ok:
-                summaries.append(_with(r.value.summary(), kind="baseline", seeds=1))
+                summaries.append(_with(anchored(r.value).summary(), kind="baseline", seeds=1))
         for algo in plan.agents:
             runs = [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])]
             timings[f"{scene} {algo}"] = sum(r.wall_s for r in runs)
@@ -141,6 +161,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             pooled = [e for e, _ in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
+            merged.values["normalized_score"] = np.concatenate(
+                [anchored(e).values["normalized_score"] for e in pooled])
             budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
             summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=len(done)))
     elapsed = time.perf_counter() - started
@@ -157,6 +179,12 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))
     return summaries
+
+
+def _anchored(episodes: Episodes, zero: np.ndarray, oracle: np.ndarray) -> Episodes:
+    """``episodes`` with the benchmark's normalized score (:func:`normalized_scores`) in place of the env's."""
+    values = {**episodes.values, "normalized_score": normalized_scores(episodes.values["error_sum_mm"], zero, oracle)}
+    return Episodes(episodes.policy, episodes.scene, values, episodes.decision_us)
 
 
 def _torch_single_thread() -> None:
@@ -248,8 +276,11 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
           f"agents, pooled); training seeds per agent: {plan.seeds}; agent budgets (env steps): {budgets}. Cells: "
-          "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 0 = zero force, 100 = exact "
-          "oracle (episode's cumulative shape error). Decision time: one observation, median.\n",
+          "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
+          "E_oracle) per episode, E = the episode's summed RMS shape error on its target; 0 = no force, 100 = the planning "
+          "oracle (the true response and creep planned ahead, `baselines.policies.PlanningOracle`; on the laryngoscope "
+          "scenes it acts through the ideal device: a bound no device reaches). Decision time: one observation, "
+          "median.\n",
           format_table(summaries), "",
           *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),

@@ -40,9 +40,25 @@ def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, A
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
+def ideal_counterpart(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, Any]]:
+    """The scene with the ideal device in place of its own (same tissue, dynamics, control period,
+    horizon and targets): where the benchmark's oracle plans for a laryngoscope scene."""
+    env_id, kwargs = scene_kwargs(scene, obs_mode)
+    if env_id not in HAPTIC_SCENES:
+        return env_id, kwargs
+    kwargs["device"] = {**kwargs.get("device", {}), "kind": "ideal"}
+    return "SoftSphere-v0", kwargs
+
+
 def device_kind(scene: str) -> str:
     """``"laryngoscope"`` for the SoftSphereHaptic scenes, ``"ideal"`` otherwise."""
     return "laryngoscope" if scene_kwargs(scene)[0] in HAPTIC_SCENES else "ideal"
+
+
+def normalized_scores(error_sum: np.ndarray, zero: np.ndarray, oracle: np.ndarray) -> np.ndarray:
+    """The benchmark's normalized score per episode: ``100 (E_zero - E) / (E_zero - E_oracle)`` with ``E``
+    the episode's summed shape error on the same target (0 = no force, 100 = the planning oracle)."""
+    return 100.0 * (zero - error_sum) / np.maximum(zero - oracle, 1e-12)
 
 
 @dataclass
@@ -65,15 +81,20 @@ class Episodes:
         return out
 
 
-def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000) -> Episodes:
-    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin)."""
-    env_id, kwargs = scene_kwargs(scene, getattr(policy, "obs_mode", "vector"))
-    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
+def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000, ideal: bool = False) -> Episodes:
+    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin); with
+    ``ideal``, on the scene's :func:`ideal_counterpart` (the same targets)."""
+    obs_mode = getattr(policy, "obs_mode", "vector")
+    env_id, kwargs = ideal_counterpart(scene, obs_mode) if ideal else scene_kwargs(scene, obs_mode)
+    horizon = {**{**ENV_SCENES, **HAPTIC_SCENES}[scene_kwargs(scene)[0]].get("task", {}), **kwargs.get("task", {})}.get(
+        "horizon", gym.spec(env_id).max_episode_steps)
+    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", max_episode_steps=horizon,
                         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
     policy.reset()
     obs, _ = venv.reset(seed=seed)
     done = np.zeros(episodes, dtype=bool)
     first_success = np.full(episodes, np.nan)
+    error_sum = np.zeros(episodes)                 # the episode's summed RMS shape error (mm x steps)
     final: dict[str, np.ndarray] = {}
     step = 0
     while not done.all():
@@ -82,18 +103,22 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000) -> 
         running = ~done
         success_now = np.where(info.get("_is_success", np.zeros(episodes, bool)), info.get("is_success", False), False)
         ended = (terminated | truncated) & running
+        # this step's error: from final_info where an episode ended (info then holds the reset)
+        now = info.get("shape_error_mm", np.zeros(episodes))
         if ended.any():
             fi = info["final_info"]
+            now = np.where(ended, fi["shape_error_mm"], now)
             success_now = np.where(ended, fi["is_success"], success_now)
             for key in ("shape_error_mm", "is_success", "normalized_score", "peak_force_N"):
                 final.setdefault(key, np.zeros(episodes, dtype=fi[key].dtype))[ended] = fi[key][ended]
             for key in CLINICAL if "clinical" in fi else ():
                 final.setdefault(key, np.full(episodes, np.nan))[ended] = fi["clinical"][key][ended]
+        error_sum += np.where(running, now, 0.0)
         first_success = np.where(running & success_now & np.isnan(first_success), step, first_success)
         done |= ended
     values = {"final_error_mm": final["shape_error_mm"], "success": final["is_success"].astype(np.float64),
               "normalized_score": final["normalized_score"], "steps_to_success": first_success,
-              "peak_force_N": final["peak_force_N"], **{key: final[key] for key in CLINICAL if key in final}}
+              "peak_force_N": final["peak_force_N"], "error_sum_mm": error_sum, **{key: final[key] for key in CLINICAL if key in final}}
     return Episodes(getattr(policy, "name", str(policy)), scene, values, decision_latency_us(policy, obs))
 
 

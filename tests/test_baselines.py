@@ -8,7 +8,7 @@ import pytest
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
 from baselines.benchmark import Plan, run
 from baselines.evaluate import bootstrap_ci, evaluate, iqm, scene_kwargs
-from baselines.policies import BASELINES, InversionPolicy, applies, make_baseline
+from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
 from softenv.envs.config import make_config
 from softenv.envs.world import World
@@ -120,7 +120,8 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
     md = (tmp_path / "benchmark.md").read_text()
     assert "softenv compare --test" in md and "| SoftSphere-v0 | oracle |" in md
     # the laryngoscope's clinical metrics: in their own table, and in the CSV (empty on the ideal scene)
-    expert = next(s for s in summaries if s["policy"] == "expert")
+    oracle, expert = (next(s for s in summaries if s["policy"] == name) for name in ("oracle", "expert"))
+    assert oracle["normalized_score"]["mean"] == pytest.approx(100.0) and expert["normalized_score"]["ci_high"] < 100
     assert expert["peak_incisor_force_N"]["mean"] == 0.0 and expert["glottic_view_pct"]["mean"] > 19.0
     assert "| SoftSphereHaptic-v0 | expert | 3" in md and "glottic view (%)" in md
     rows = (tmp_path / "benchmark.csv").read_text().splitlines()
@@ -174,3 +175,49 @@ def test_baselines_on_the_laryngoscope_rank_as_expected(haptic_world):
     assert 20 < scores["invert-poly2"].values["normalized_score"].mean() < scores["expert"].values["normalized_score"].mean()
     with pytest.raises(ValueError, match="'oracle' does not apply to device.kind='laryngoscope'"):
         make_baseline("oracle", haptic_world)
+
+
+def test_planning_oracle_matches_a_three_step_search_where_the_force_saturates():
+    """Under creep the oracle overshoots the target's force, saturating at the device's limit for the
+    first steps; there its greedy plan must be as good as the best 3-step force sequence found by
+    bounded quasi-Newton search from its own plan and from random starts."""
+    import gymnasium as gym
+    from scipy.optimize import minimize
+
+    env_id, kwargs = scene_kwargs("SoftSphereViscoelastic-v0")
+    kwargs.pop("obs_mode")
+    env = gym.make(env_id, **kwargs).unwrapped
+    world, dyn = env.world, env.world.dynamics
+    oracle = PlanningOracle(world)
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        for _ in range(5):
+            obs, *_ = env.step(oracle.predict(obs))
+        z0, target = env._z.copy(), env._targets[0]
+
+        def cost(seq: np.ndarray) -> float:
+            z, total = z0.copy(), 0.0
+            for a in seq.reshape(3, 4):
+                b = dyn.step(z, world.response(world.device.features(a)[None])[0])
+                total += float(np.sqrt(np.sum((b - target) ** 2)))
+            return total
+
+        plan = []
+        for _ in range(3):
+            plan.append(oracle.predict(obs).astype(np.float64))
+            obs, *_ = env.step(plan[-1].astype(np.float32))
+        starts = [np.ravel(plan), *np.random.default_rng(seed).uniform(-1, 1, (4, 12))]
+        best = min(minimize(cost, x0, bounds=[(-1, 1)] * 12, method="L-BFGS-B").fun for x0 in starts)
+        assert np.abs(np.ravel(plan)).max() == pytest.approx(1.0)          # saturated: a real constraint
+        assert cost(np.ravel(plan)) <= best * (1 + 1e-3)
+
+
+def test_planning_oracle_beats_holding_the_target_force_under_creep():
+    """The old anchor (hold the target's force) is what agents beat; the planning oracle beats it."""
+    kwargs = scene_kwargs("SoftSphereViscoelastic-v0")[1]
+    kwargs.pop("obs_mode")
+    world = World(make_config(**kwargs))
+    oracle = evaluate(PlanningOracle(world), "SoftSphereViscoelastic-v0", episodes=10)
+    hold = evaluate(InversionPolicy(world, world.response, "hold"), "SoftSphereViscoelastic-v0", episodes=10)
+    assert (oracle.values["error_sum_mm"] < hold.values["error_sum_mm"]).all()
+    assert oracle.values["normalized_score"].mean() > 105                 # on the env's hold-the-force scale
