@@ -159,6 +159,16 @@ def cmd_score(args: argparse.Namespace) -> None:
         print(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png")
 
 
+def cmd_play(args: argparse.Namespace) -> None:
+    try:
+        from . import play
+    except ImportError as exc:
+        raise ValueError(f"softenv play needs pygame (pip install 'softenv[play]'): {exc}") from exc
+    if args.headless:
+        play.headless()
+    play.run(args.seconds, args.out)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .response import REGRESSORS
 
@@ -215,6 +225,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
     p.add_argument("--retries", type=int, default=1, help="re-runs of a failed job before it is reported (default 1)")
 
+    p = sub.add_parser("play", help="drive the laryngoscope yourself (keyboard, mouse, gamepad); scored at the end")
+    p.add_argument("--seconds", type=float, default=10.0, help="session length (default 10 s)")
+    p.add_argument("--out", default="play", help="where the device log and its score report go (default: play)")
+    p.add_argument("--headless", action="store_true", help="no window (SDL's dummy driver): for a smoke run")
+
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "
                                       "force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
@@ -238,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
             cmd_compare(args, argv)
         elif args.command == "score":
             cmd_score(args)
+        elif args.command == "play":
+            cmd_play(args)
     except (ValueError, OSError) as exc:        # bad arguments, files, or a file system that refuses
         print(f"softenv {args.command}: error: {exc}", file=sys.stderr)
         return 2
