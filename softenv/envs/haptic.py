@@ -89,10 +89,11 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     |---|---|---|
     | ``reward_incisor`` | ``-w F_incisor / F_safe`` (any force on the teeth is an error of technique) | ``reward.incisor_weight`` = 1 |
 
-    ``normalized_score`` keeps SoftSphere's anchors until the benchmark's planning oracle arrives:
-    0 = no motion (the blade never touches, the shape stays at rest), 100 = the ideal-device oracle,
-    which holds the target's equilibrium shape from the first step. A device with mass, coupling and
-    speed limits needs time to get there, so scores here stay below 100.
+    ``normalized_score`` keeps SoftSphere's running anchors: 0 = no motion (the blade never touches,
+    the shape stays at rest), 100 = the ideal device holding the target's equilibrium shape from the
+    first step. A device with mass, coupling and speed limits needs time to get there, so scores here
+    stay below 100. ``softenv compare`` normalizes by its planning oracle on the scene's ideal-device
+    counterpart instead (``baselines.policies.PlanningOracle``), a bound no device reaches.
 
     ## Starting State
 
