@@ -221,3 +221,22 @@ def test_planning_oracle_beats_holding_the_target_force_under_creep():
     hold = evaluate(InversionPolicy(world, world.response, "hold"), "SoftSphereViscoelastic-v0", episodes=10)
     assert (oracle.values["error_sum_mm"] < hold.values["error_sum_mm"]).all()
     assert oracle.values["normalized_score"].mean() > 105                 # on the env's hold-the-force scale
+
+
+@pytest.mark.parametrize("scene", ["SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0"])
+def test_the_oracle_anchor_plans_on_the_same_targets_as_the_laryngoscope_scene(scene):
+    """compare normalizes a laryngoscope scene's episodes by the oracle on its ideal-device
+    counterpart, episode by episode: the two must draw the same targets from the same seeds."""
+    import gymnasium as gym
+
+    from baselines.evaluate import ideal_counterpart
+
+    firsts = []
+    for env_id, kwargs in (scene_kwargs(scene), ideal_counterpart(scene)):
+        venv = gym.make_vec(env_id, num_envs=5, vectorization_mode="vector_entry_point",
+                            max_episode_steps=kwargs["task"]["horizon"], **kwargs)
+        obs, _ = venv.reset(seed=1000)
+        firsts.append((obs[:, venv.unwrapped.world.k:2 * venv.unwrapped.world.k], venv.unwrapped.world.horizon))
+    (haptic, h1), (ideal, h2) = firsts
+    np.testing.assert_array_equal(haptic, ideal)
+    assert h1 == h2 == (250 if scene == "SoftSphereHaptic-v0" else 500)
