@@ -86,8 +86,7 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000, ide
     ``ideal``, on the scene's :func:`ideal_counterpart` (the same targets)."""
     obs_mode = getattr(policy, "obs_mode", "vector")
     env_id, kwargs = ideal_counterpart(scene, obs_mode) if ideal else scene_kwargs(scene, obs_mode)
-    horizon = {**{**ENV_SCENES, **HAPTIC_SCENES}[scene_kwargs(scene)[0]].get("task", {}), **kwargs.get("task", {})}.get(
-        "horizon", gym.spec(env_id).max_episode_steps)
+    horizon = kwargs["task"].get("horizon", gym.spec(env_id).max_episode_steps)      # the scene's, over the id's
     venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", max_episode_steps=horizon,
                         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
     policy.reset()

@@ -6,8 +6,8 @@ Every policy reads the env's vector observation (one row or a batch) and returns
 * ``invert-<model>``: the regressor learns the forward map force -> ``b`` on the scene's workspace
   data; the policy inverts it for the observed target ``b*`` by projected Levenberg-Marquardt over
   the action box from several starts (the previous action first: a warm start), keeping the start
-  whose predicted shape is closest to the target. ``oracle`` is the same inversion of the scene's
-  exact response.
+  whose predicted shape is closest to the target. ``oracle`` (:class:`PlanningOracle`) inverts the
+  scene's exact response for the shape that makes the next step's error smallest under creep.
 * ``direct-<model>``: the same regressor family fitted the other way, target -> force, on the
   leading four shape parameters (four inputs, like the forward problem, so ANFIS keeps 16 rules).
 
@@ -19,8 +19,9 @@ force: there every force-giving policy above hands its force (the paper's haptic
 reverse: target ``b*`` -> force) to :class:`softenv.control.HandController`, which realises it
 through the blade by the textbook sequence (insert, lift along the handle, sweep). ``expert`` is
 that controller on the exact response's inversion: the scripted expert, a clinician who knows
-which force gives which shape. ``oracle`` stays the ideal device's (a planning oracle for the
-device is open work), so it is not offered there.
+which force gives which shape. ``oracle`` is the ideal device's (a planning oracle through the
+device is open work), so it is not offered there; the benchmark runs it on the scene's ideal-device
+counterpart as the score's 100.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from softenv.control import HandController
+from softenv.control import HAND_POSE, HandController
 from softenv.envs.world import World
 from softenv.response import ResponseModel, make_response
 
@@ -85,11 +86,11 @@ class _RowPolicy:
         if self._previous is None or len(self._previous) != len(rows):
             self._previous = np.repeat(rest[None], len(rows), axis=0)
         # an episode's first decision (hand at the start, no action yet): forget the last episode's force
-        end = 2 * self.k + self.world.device_obs_size
-        fresh = ~np.any(rows[:, -4:], axis=1) & ~np.any(rows[:, end - 7:end - 3], axis=1)
+        device = rows[:, 2 * self.k:2 * self.k + self.world.device_obs_size]
+        fresh = ~np.any(rows[:, -4:], axis=1) & ~np.any(device[:, HAND_POSE], axis=1)
         self._previous[fresh] = rest
         self._previous = force = self._force(rows, self._previous)
-        return self.controller.act(rows[:, 2 * self.k:end], self.world.device.features(force))
+        return self.controller.act(device, self.world.device.features(force))
 
     def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
         """The force (ideal device's action units) that should reach each row's target."""

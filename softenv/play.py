@@ -114,7 +114,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     steps = max(1, int(round(seconds / dt)))
     env = haptic_env(scene, steps)
     world = env.world
-    env.reset(seed=0, options={"target": world.device.normalised((world.family.low + world.family.high) / 2)})
+    env.reset(seed=0, options={"target": world.device.normalised(world.family.centre)})
     pygame.init()
     try:
         screen = pygame.display.set_mode(SIZE)

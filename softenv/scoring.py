@@ -43,7 +43,6 @@ from .envs.config import make_config
 from .logs import FORCE_LOG, HAND_LOG, MAX_DURATION_S, check_limits, check_table, read_log, save_log
 
 COLUMNS = FORCE_LOG.columns
-TRAJECTORY_VERSION = 1
 INCISOR_LIMIT_N = 10.0
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
 HAND_WEIGHTS = {"accuracy": 0.3, "speed": 0.15, "safety": 0.15, "teeth": 0.15, "smoothness": 0.1, "view": 0.15}
@@ -126,7 +125,7 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
 
 
 def _family_centre(world: Any) -> np.ndarray:
-    return world.device.normalised((world.family.low + world.family.high) / 2)
+    return world.device.normalised(world.family.centre)
 
 
 def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, jerk_rms: float,
@@ -297,7 +296,6 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
     if schema is HAND_LOG:
-        hand_actions(table, scene, source)                     # every check before the replay
         parts, trainee, expert = score_hand_log(table, scene, source)
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
     else:

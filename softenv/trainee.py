@@ -28,7 +28,6 @@ import numpy as np
 from ._validation import check_real
 from .envs import HAPTIC_SCENES
 
-ERRORS = ("tremor", "hesitation", "lever", "overshoot", "direction")
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
 
@@ -66,7 +65,7 @@ def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0
     steps = max(1, int(round(duration_s / dt)))
     env = haptic_env(scene, steps)
     world = env.world
-    target = (world.family.low + world.family.high) / 2
+    target = world.family.centre
     controller = HandController(world.config)
     obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
     device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
@@ -80,6 +79,8 @@ def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0
 def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
             lever: float = 0.0, overshoot: float = 0.0, direction: float = 0.0, seed: int = 0) -> np.ndarray:
     """The hand log ``log`` with a trainee's errors (see the module docstring; amounts >= 0)."""
+    from .scoring import hand_limits
+
     for name, value, high in (("tremor", tremor, 5.0), ("hesitation", hesitation, 60.0), ("lever", lever, 0.5),
                               ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
         check_real(value, name, 0.0, high)
@@ -102,7 +103,8 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
     if hesitation > 0.0:
         moving = np.flatnonzero(np.any(np.abs(np.diff(log[:, 1:], axis=0)) > 1e-4, axis=1))   # faster than 5 mm/s
         t, pose = _pause(t, pose, hesitation, (moving[0], moving[-1] + 1) if moving.size else (0, len(t) - 1))
-    low, high = _hand_limits(scene)
+    limits = np.array(list(hand_limits(haptic_config(scene)).values()))      # (4, 2): the workspace per column
+    low, high = limits[:, 0], limits[:, 1]
     return np.column_stack([t, _speed_limited(np.clip(pose, low, high), float(t[1] - t[0]), scene)])
 
 
@@ -130,16 +132,6 @@ def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, i
     rows = np.concatenate([np.arange(len(t))] + [np.full(held, s) for s in stops])
     rows = np.sort(rows, kind="stable")
     return np.arange(len(rows)) * dt, pose[rows]
-
-
-def _hand_limits(scene: dict[str, Any] | None) -> tuple[np.ndarray, np.ndarray]:
-    """The hand's workspace relative to its start pose (x, z, pitch, y)."""
-    from .devices.laryngoscope import LaryngoscopeParams
-
-    p = LaryngoscopeParams.from_config(haptic_config(scene))
-    (lx, lz, lp, ly), (hx, hz, hp, hy) = p.hand_box
-    gx, gz = p.grip_start
-    return np.array([lx - gx, lz - gz, lp, ly]), np.array([hx - gx, hz - gz, hp, hy])
 
 
 # the largest amount of each error (skill level 4 of 4); each trainee draws 0.5-1.5 times its level's share

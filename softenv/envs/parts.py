@@ -60,6 +60,11 @@ class TargetFamily:
         self.n_cells = cells
         self.split = split
 
+    @property
+    def centre(self) -> np.ndarray:
+        """The family's central force (trainee scoring's target)."""
+        return (self.low + self.high) / 2
+
     def sample(self, rng: np.random.Generator) -> np.ndarray:
         cell = self.cells[rng.integers(len(self.cells))]
         unit = (cell + rng.random(self.low.size)) / self.n_cells

@@ -73,7 +73,7 @@ class World:
         self.sqrt_variance = scene.sqrt_variance
         self.inv_sqrt = 1.0 / self.sqrt_variance
         self.b_rest = scene.response.predict_rowwise(scene.rest_features[None])[0]
-        centre = scene.response.predict_rowwise(((low + high) / 2)[None])[0]
+        centre = scene.response.predict_rowwise(self.family.centre[None])[0]
         press = (scene.workspace.low + np.asarray(scene.workspace.high)) / 2
         press[2] = scene.workspace.high[2]                        # the largest pressing force, mid-workspace
         design = scene.response.predict_rowwise(press[None])[0]
