@@ -7,7 +7,7 @@ import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
 from baselines.benchmark import Plan, run
-from baselines.evaluate import bootstrap_ci, evaluate, iqm, scene_kwargs
+from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
 from softenv.envs.config import make_config
@@ -83,6 +83,16 @@ def test_yaml_strings_are_parsed_as_literals_only():
     with pytest.raises(ValueError):
         _literal_dict("dict(a=__import__('os').getcwd())")
     assert hyperparams("sac-her", "SoftSphere-v0")["replay_buffer_kwargs"]["goal_selection_strategy"] == "future"
+
+
+def test_her_starts_learning_only_after_every_env_finished_an_episode():
+    """SB3's HER buffer samples only finished episodes (it raises before the first one ends)."""
+    import gymnasium as gym
+
+    for env_id in sorted({env_id for env_id, _ in SCENES.values()}):
+        params = hyperparams("sac-her", env_id)
+        horizon = gym.make(env_id).unwrapped.world.horizon
+        assert params["learning_starts"] >= params["n_envs"] * horizon, env_id
 
 
 def test_agent_file_is_checked_against_the_scene(tmp_path):
