@@ -414,6 +414,16 @@ def _lateral_step(lat_y: Any, lat_v: Any, hand_lat: Any, hand_lat_v: Any, anchor
     return Q, lat_y, lat_v, anchor
 
 
+def _near_walls(pose: tuple[float, ...], velocity: tuple[float, ...], low: tuple[float, ...],
+                high: tuple[float, ...], period: float) -> list[bool]:
+    """For each axis of a hand at ``pose`` moving at ``velocity`` for ``period`` s: whether it comes
+    within 1e-6 (m or rad) of its box. Where it does not, every substep's wall clip returns the
+    velocity unchanged: the clip's bounds ``(low - x) / h`` and ``(high - x) / h`` are ~1e-6 / h away
+    from it, and the rounding of ``x`` is ~1e-17."""
+    return [min(x, x + v * period) < lo + 1e-6 or max(x, x + v * period) > hi - 1e-6
+            for x, v, lo, hi in zip(pose, velocity, low, high)]
+
+
 def _hand_command(action: Any, pitch: Any, p: LaryngoscopeParams, ops: Any) -> tuple[Any, Any, Any, Any]:
     """World velocities ``(vX, vY, spin, v_lateral)`` of the hand for normalised actions, in the hand's
     frame at the start of the control period: insert along the blade toward its tip, press along the
@@ -712,6 +722,11 @@ class Laryngoscope(_DeviceBase):
         # the kinematic hand moves exactly as Chipmunk integrates it (p += (v + 0) h), so it is tracked
         # here rather than read back
         gx, gy, pitch = self._hand_pose
+        # the hand's walls clip its velocity each substep; along an axis whose whole path this period
+        # stays clear of them, that clip returns the command itself, so it is skipped
+        wall_x, wall_y, wall_p, wall_l = _near_walls((gx, gy, pitch, hand_lat), (vX, vY, spin, v_lat), lo, hi,
+                                                     h * count)
+        hvx, hvy, hw, hl = vX, vY, spin, v_lat
         written = None
         self._impulse = 0.0
         self._space.space._locked = True                    # as pymunk's Space.step does around the C step
@@ -719,15 +734,18 @@ class Laryngoscope(_DeviceBase):
             for _ in range(count):
                 p, v = get_p(blade), get_v(blade)
                 px, py, vx, vy, a, w = p.x, p.y, v.x, v.y, get_a(blade), get_w(blade)
-                # the hand's walls: ScalarOps.clip, inlined
-                x, low, high = vX, (lo[0] - gx) / h, (hi[0] - gx) / h
-                hvx = low if x < low else (high if x > high else x)
-                x, low, high = vY, (lo[1] - gy) / h, (hi[1] - gy) / h
-                hvy = low if x < low else (high if x > high else x)
-                x, low, high = spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h
-                hw = low if x < low else (high if x > high else x)
-                x, low, high = v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h
-                hl = low if x < low else (high if x > high else x)
+                if wall_x:                                  # ScalarOps.clip, inlined
+                    x, low, high = vX, (lo[0] - gx) / h, (hi[0] - gx) / h
+                    hvx = low if x < low else (high if x > high else x)
+                if wall_y:
+                    x, low, high = vY, (lo[1] - gy) / h, (hi[1] - gy) / h
+                    hvy = low if x < low else (high if x > high else x)
+                if wall_p:
+                    x, low, high = spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h
+                    hw = low if x < low else (high if x > high else x)
+                if wall_l:
+                    x, low, high = v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h
+                    hl = low if x < low else (high if x > high else x)
                 hand_lat = hand_lat + h * hl
                 ca, sa = cos(a), sin(a)
                 cx, cy, dist = _nearest_point(px, py, ca, sa, c, ScalarOps)
