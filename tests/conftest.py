@@ -28,7 +28,7 @@ def cache_dir() -> str:
     return _CACHE
 
 
-HEAVY_MODULES = ("pymunk", "matplotlib", "torch", "scipy")
+HEAVY_MODULES = ("pymunk", "matplotlib", "torch", "scipy", "felupe")
 
 
 @pytest.fixture(scope="session")

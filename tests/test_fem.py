@@ -1,0 +1,129 @@
+"""The finite-element tongue against closed forms: homogeneous neo-Hookean stretch, Hooke's law in the
+small-strain limit, equilibrium of the base with the load, mesh convergence, and refused solves."""
+
+import math
+
+import numpy as np
+import pytest
+
+fe = pytest.importorskip("felupe")
+from scipy.optimize import brentq  # noqa: E402
+
+from softenv.fem.mesh import ball_mesh, base_cap, cube_hexahedra, surface_nodes  # noqa: E402
+from softenv.fem.tongue import FEParams, FETongue, NonConvergence, newton  # noqa: E402
+
+E, NU = 1.0e5, 0.49
+PARAMS = FEParams(E=E, nu=NU)
+
+
+def uniaxial_closed_form(stretch: float) -> tuple[float, float]:
+    """Lateral stretch and nominal axial stress (Pa) of ``psi = mu/2 (I1_bar - 3) + K/2 (J - 1)^2`` under
+    ``F = diag(l, l, stretch)`` with no lateral stress."""
+    mu, K = PARAMS.mu, PARAMS.bulk
+
+    def cauchy(l: float) -> tuple[float, float]:
+        J = l * l * stretch
+        i1 = 2 * l * l + stretch * stretch
+        dev = mu * J ** (-5 / 3)
+        return dev * (l * l - i1 / 3) + K * (J - 1), dev * (stretch * stretch - i1 / 3) + K * (J - 1)
+
+    lateral = brentq(lambda l: cauchy(l)[0], 0.2, 3.0, xtol=1e-15, rtol=1e-15)
+    return lateral, cauchy(lateral)[1] * lateral * lateral     # nominal: J sigma / stretch = sigma l^2
+
+
+def stretch_unit_cube(stretch: float, steps: int = 4) -> tuple[float, float]:
+    """FE unit cube, symmetry planes at x, y, z = 0, top face moved to z = ``stretch``: returns the
+    lateral stretch and the top face's force (N = Pa on the unit face)."""
+    points, cells = cube_hexahedra(2)
+    points = (points + 1.0) / 2.0
+    mesh = fe.Mesh(points, cells, "hexahedron")
+    field = fe.FieldContainer([fe.Field(fe.RegionHexahedron(mesh), dim=3)])
+    body = fe.SolidBodyNearlyIncompressible(fe.NeoHooke(mu=PARAMS.mu), field, bulk=PARAMS.bulk)
+    x, y, z = points.T
+    top = np.isclose(z, 1.0)
+    bounds = {"x": fe.Boundary(field[0], fx=0.0, skip=(0, 1, 1)), "y": fe.Boundary(field[0], fy=0.0, skip=(1, 0, 1)),
+              "z": fe.Boundary(field[0], fz=0.0, skip=(1, 1, 0)), "top": fe.Boundary(field[0], mask=top, skip=(1, 1, 0))}
+    fixed, free = fe.dof.partition(field, bounds)
+    for s in np.linspace(1.0, stretch, steps + 1)[1:]:
+        imposed = field[0].values.copy()
+        imposed[top, 2] = s - 1.0
+        newton(body, field, free, fixed, np.zeros(imposed.size), imposed.ravel()[fixed], 1e-8, 25, f"stretch {s}")
+    force = np.asarray(body.assemble.vector(field).todense()).reshape(-1, 3)[top, 2].sum()
+    corner = np.argmax(x + y + z)
+    return 1.0 + field[0].values[corner, 0], force
+
+
+@pytest.mark.parametrize("stretch", [1.6, 0.7])
+def test_homogeneous_stretch_of_a_cube_matches_the_closed_form(stretch):
+    lateral, force = stretch_unit_cube(stretch)
+    want_lateral, want_stress = uniaxial_closed_form(stretch)
+    assert lateral == pytest.approx(want_lateral, rel=1e-9)
+    assert force == pytest.approx(want_stress, rel=1e-9)
+
+
+def test_small_strain_limit_is_hookes_law():
+    eps = 1e-6
+    lateral, force = stretch_unit_cube(1.0 + eps, steps=1)
+    assert force / eps == pytest.approx(E, rel=1e-5)                 # Young's modulus
+    assert -(lateral - 1.0) / eps == pytest.approx(NU, rel=1e-4)      # Poisson's ratio
+
+
+def test_ball_mesh_fills_the_ball_and_marks_surface_and_base():
+    R = 0.03
+    points, cells = ball_mesh(R, 8)
+    region = fe.RegionHexahedron(fe.Mesh(points, cells, "hexahedron"))
+    assert (region.dV > 0).all()                                          # no inverted or degenerate cell
+    assert region.dV.sum() == pytest.approx(4 / 3 * math.pi * R ** 3, rel=0.03)
+    surface = surface_nodes(points, R)
+    assert surface.sum() == 6 * 8 * 8 + 2                                 # the cube's boundary nodes
+    for cap_deg in (45.0, 90.0):
+        cap = base_cap(points, R, cap_deg)
+        angle = np.degrees(np.arccos(np.clip(-points[cap, 2] / R, -1, 1)))
+        assert cap.any() and angle.max() <= cap_deg + 1e-9
+        assert (points[~cap & surface, 2] > -R * math.cos(math.radians(cap_deg)) + 1e-12).all()
+
+
+@pytest.fixture(scope="module")
+def tongue():
+    return FETongue(FEParams(cells_per_side=4))
+
+
+def test_the_base_balances_the_blade_and_the_patch_load_sums_to_the_force(tongue):
+    force = np.array([6.0, -3.0, -30.0])
+    contact = np.array([0.3, 0.1, 1.0])
+    load = tongue.patch_load(contact, force)
+    assert load.sum(axis=0) == pytest.approx(force, rel=1e-12)
+    loaded = np.flatnonzero(np.abs(load).sum(axis=1))
+    tip = tongue.points[loaded] / tongue.params.radius
+    c = contact / np.linalg.norm(contact)
+    assert np.degrees(np.arccos(tip @ c)).max() < np.degrees(tongue.params.patch_radius / tongue.params.radius) + 25
+    solution = tongue.solve(contact, force, steps=4)
+    for fraction, support in zip(solution.fractions, solution.support):
+        assert support == pytest.approx(-fraction * force, abs=1e-8 * np.linalg.norm(force))
+    assert np.all(solution.displacements[:, tongue.cap] == 0.0)
+
+
+def test_indentation_converges_under_mesh_refinement():
+    """Indentation of the patch's centre at half the design force on 2, 4 and 8 cells a side: the
+    differences shrink (the observed order is in results/fem.md)."""
+    depth = []
+    for n in (2, 4, 8):
+        t = FETongue(FEParams(cells_per_side=n))
+        s = t.solve([0, 0, 1], [0, 0, -20.0], steps=2)
+        depth.append(-s.displacements[-1, np.argmax(t.points[:, 2]), 2])
+    assert abs(depth[2] - depth[1]) < 0.6 * abs(depth[1] - depth[0])
+    assert 0.1 * t.params.radius < depth[-1] < 0.5 * t.params.radius
+
+
+def test_a_solve_that_fails_names_the_case_and_the_load_step(tongue):
+    with pytest.raises(NonConvergence, match=r"load step 1/5.*did not converge in 1 iterations"):
+        FETongue(FEParams(cells_per_side=2, max_iterations=1)).solve([0, 0, 1], [0, 0, -40.0])
+    with pytest.raises(NonConvergence, match=r"force \[0.0, 0.0, -100000.0\] N at \[0, 0, 1\], load step 1/2"):
+        tongue.solve([0, 0, 1], [0.0, 0.0, -1e5], steps=2)
+
+
+@pytest.mark.parametrize("field, value, allowed", [("nu", 0.5, r"\[0, 0.4999\]"), ("E", -1.0, r"\[1, 1e\+09\]"),
+                                                   ("cells_per_side", 1, r"\[2, 64\]"), ("cap_deg", 95.0, r"\[10, 90\]")])
+def test_out_of_range_parameters_are_refused(field, value, allowed):
+    with pytest.raises(ValueError, match=rf"{field}.*{allowed}"):
+        FEParams(**{field: value})
