@@ -7,63 +7,27 @@ import numpy as np
 import pytest
 
 fe = pytest.importorskip("felupe")
-from scipy.optimize import brentq  # noqa: E402
-
-from softenv.fem.mesh import ball_mesh, base_cap, cube_hexahedra, surface_nodes  # noqa: E402
-from softenv.fem.tongue import FEParams, FETongue, NonConvergence, newton  # noqa: E402
+from softenv.fem.mesh import (ball_mesh, ball_to_cube, base_cap, cube_hexahedra, cube_to_ball,  # noqa: E402
+                              interpolate_nodal, surface_nodes)
+from softenv.fem.tongue import FEParams, FETongue, NonConvergence  # noqa: E402
+from softenv.fem.verification import stretch_unit_cube, uniaxial_closed_form  # noqa: E402
+from softenv.geometry import paper_mesh  # noqa: E402
 
 E, NU = 1.0e5, 0.49
 PARAMS = FEParams(E=E, nu=NU)
 
 
-def uniaxial_closed_form(stretch: float) -> tuple[float, float]:
-    """Lateral stretch and nominal axial stress (Pa) of ``psi = mu/2 (I1_bar - 3) + K/2 (J - 1)^2`` under
-    ``F = diag(l, l, stretch)`` with no lateral stress."""
-    mu, K = PARAMS.mu, PARAMS.bulk
-
-    def cauchy(l: float) -> tuple[float, float]:
-        J = l * l * stretch
-        i1 = 2 * l * l + stretch * stretch
-        dev = mu * J ** (-5 / 3)
-        return dev * (l * l - i1 / 3) + K * (J - 1), dev * (stretch * stretch - i1 / 3) + K * (J - 1)
-
-    lateral = brentq(lambda l: cauchy(l)[0], 0.2, 3.0, xtol=1e-15, rtol=1e-15)
-    return lateral, cauchy(lateral)[1] * lateral * lateral     # nominal: J sigma / stretch = sigma l^2
-
-
-def stretch_unit_cube(stretch: float, steps: int = 4) -> tuple[float, float]:
-    """FE unit cube, symmetry planes at x, y, z = 0, top face moved to z = ``stretch``: returns the
-    lateral stretch and the top face's force (N = Pa on the unit face)."""
-    points, cells = cube_hexahedra(2)
-    points = (points + 1.0) / 2.0
-    mesh = fe.Mesh(points, cells, "hexahedron")
-    field = fe.FieldContainer([fe.Field(fe.RegionHexahedron(mesh), dim=3)])
-    body = fe.SolidBodyNearlyIncompressible(fe.NeoHooke(mu=PARAMS.mu), field, bulk=PARAMS.bulk)
-    x, y, z = points.T
-    top = np.isclose(z, 1.0)
-    bounds = {"x": fe.Boundary(field[0], fx=0.0, skip=(0, 1, 1)), "y": fe.Boundary(field[0], fy=0.0, skip=(1, 0, 1)),
-              "z": fe.Boundary(field[0], fz=0.0, skip=(1, 1, 0)), "top": fe.Boundary(field[0], mask=top, skip=(1, 1, 0))}
-    fixed, free = fe.dof.partition(field, bounds)
-    for s in np.linspace(1.0, stretch, steps + 1)[1:]:
-        imposed = field[0].values.copy()
-        imposed[top, 2] = s - 1.0
-        newton(body, field, free, fixed, np.zeros(imposed.size), imposed.ravel()[fixed], 1e-8, 25, f"stretch {s}")
-    force = np.asarray(body.assemble.vector(field).todense()).reshape(-1, 3)[top, 2].sum()
-    corner = np.argmax(x + y + z)
-    return 1.0 + field[0].values[corner, 0], force
-
-
 @pytest.mark.parametrize("stretch", [1.6, 0.7])
 def test_homogeneous_stretch_of_a_cube_matches_the_closed_form(stretch):
-    lateral, force = stretch_unit_cube(stretch)
-    want_lateral, want_stress = uniaxial_closed_form(stretch)
+    lateral, force = stretch_unit_cube(stretch, PARAMS)
+    want_lateral, want_stress = uniaxial_closed_form(stretch, PARAMS)
     assert lateral == pytest.approx(want_lateral, rel=1e-9)
     assert force == pytest.approx(want_stress, rel=1e-9)
 
 
 def test_small_strain_limit_is_hookes_law():
     eps = 1e-6
-    lateral, force = stretch_unit_cube(1.0 + eps, steps=1)
+    lateral, force = stretch_unit_cube(1.0 + eps, PARAMS, steps=1)
     assert force / eps == pytest.approx(E, rel=1e-5)                 # Young's modulus
     assert -(lateral - 1.0) / eps == pytest.approx(NU, rel=1e-4)      # Poisson's ratio
 
@@ -81,6 +45,25 @@ def test_ball_mesh_fills_the_ball_and_marks_surface_and_base():
         angle = np.degrees(np.arccos(np.clip(-points[cap, 2] / R, -1, 1)))
         assert cap.any() and angle.max() <= cap_deg + 1e-9
         assert (points[~cap & surface, 2] > -R * math.cos(math.radians(cap_deg)) + 1e-12).all()
+
+
+def test_paper_grid_points_are_found_in_the_mesh_and_fields_interpolate_as_the_elements_do():
+    R = 0.03
+    grid = paper_mesh(441, R).vertices
+    cube = ball_to_cube(grid, R)
+    assert np.abs(cube_to_ball(cube, R) - grid).max() < 1e-15
+    assert np.allclose(np.abs(cube).max(axis=1), 1.0, atol=1e-12)             # on the cube's faces
+    # a trilinear field is reproduced exactly; a smooth one converges at second order
+    points, _ = cube_hexahedra(4)
+    trilinear = np.stack([points[:, 0] * points[:, 1] * points[:, 2] - points[:, 1], 2.0 * points[:, 2]], axis=1)
+    want = np.stack([cube[:, 0] * cube[:, 1] * cube[:, 2] - cube[:, 1], 2.0 * cube[:, 2]], axis=1)
+    assert np.abs(interpolate_nodal(trilinear, cube, 4) - want).max() < 1e-14
+    errors = []
+    for n in (4, 8, 16):
+        nodes = cube_to_ball(cube_hexahedra(n)[0], R)
+        smooth = lambda x: np.sin(60.0 * x) * 1e-3  # noqa: E731  (a displacement field, m)
+        errors.append(np.abs(interpolate_nodal(smooth(nodes), cube, n) - smooth(grid)).max())
+    assert errors[1] < errors[0] / 3.0 and errors[2] < errors[1] / 3.0
 
 
 @pytest.fixture(scope="module")

@@ -57,3 +57,50 @@ def base_cap(points: np.ndarray, radius: float, cap_deg: float) -> np.ndarray:
     """Mask of the surface points within ``cap_deg`` of the bottom pole ``(0, 0, -R)``: where the
     tongue is attached (fixed)."""
     return surface_nodes(points, radius) & (points[:, 2] <= -radius * math.cos(math.radians(cap_deg)) + 1e-12)
+
+
+def ball_to_cube(points: np.ndarray, radius: float, iterations: int = 30) -> np.ndarray:
+    """Inverse of :func:`cube_to_ball`: cube coordinates ``(m, 3)`` of points in the ball, by Newton's
+    method on the map (its Jacobian in closed form); exact to ~1e-15 of the radius."""
+    q = np.asarray(points, dtype=float) / radius
+    p = q * np.linalg.norm(q, axis=1, keepdims=True) / np.maximum(np.abs(q).max(axis=1, keepdims=True), 1e-300)
+    for _ in range(iterations):
+        r = cube_to_ball(p, 1.0) - q
+        if np.abs(r).max() <= 1e-15:
+            break
+        p = p - np.linalg.solve(_map_jacobian(p), r[:, :, None])[:, :, 0]
+        p = np.clip(p, -1.0, 1.0)
+    if np.abs(cube_to_ball(p, 1.0) - q).max() > 1e-12:
+        raise ValueError("points outside the ball: no cube coordinates")
+    return p
+
+
+def _map_jacobian(p: np.ndarray) -> np.ndarray:
+    """``d cube_to_ball / d p`` at points ``(m, 3)``: ``(m, 3, 3)``."""
+    J = np.empty(p.shape + (3,))
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        x, y, z = p[:, i], p[:, j], p[:, k]
+        s = np.sqrt(1.0 - y * y / 2 - z * z / 2 + y * y * z * z / 3)
+        J[:, i, i] = s
+        J[:, i, j] = x * (-y + 2 * y * z * z / 3) / (2 * s)
+        J[:, i, k] = x * (-z + 2 * z * y * y / 3) / (2 * s)
+    return J
+
+
+def interpolate_nodal(values: np.ndarray, cube_points: np.ndarray, n: int) -> np.ndarray:
+    """Values ``(..., m_nodes, d)`` of a field on the nodes of :func:`cube_hexahedra` (``n`` a side) at
+    cube coordinates ``(m, 3)``: the hexahedra's own trilinear shape functions, so the result is the
+    finite-element field itself, with no error added."""
+    t = (np.asarray(cube_points, dtype=float) + 1.0) * (n / 2.0)
+    cell = np.clip(np.floor(t), 0, n - 1).astype(np.int64)
+    f = t - cell
+    out = 0.0
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                w = ((f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1])
+                     * (f[:, 2] if dz else 1 - f[:, 2]))
+                node = ((cell[:, 2] + dz) * (n + 1) + cell[:, 1] + dy) * (n + 1) + cell[:, 0] + dx
+                out = out + w[:, None] * values[..., node, :]
+    return out

@@ -36,7 +36,7 @@ import numpy as np
 
 from .._validation import check_int, check_real
 from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_RADIUS_M, effective_modulus
-from .mesh import ball_mesh, base_cap, surface_nodes
+from .mesh import ball_mesh, ball_to_cube, base_cap, interpolate_nodal, surface_nodes
 
 FE_POISSON = 0.49      # nearly incompressible tissue (0.45-0.5 reported; 0.49 for FE tongues)
 
@@ -192,3 +192,9 @@ class FETongue:
             support.append(internal[self.cap].sum(axis=0))
             out.append(field[0].values.copy())
         return FESolution(fractions, np.array(out), np.array(support), iterations)
+
+    def displacements_at(self, displacements: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Displacements ``(..., len(points), 3)`` at points of the undeformed ball (the paper's surface
+        grids, say) from nodal ``displacements`` ``(..., m, 3)``: the elements' own interpolation."""
+        cube = ball_to_cube(points, self.params.radius)
+        return interpolate_nodal(displacements, cube, self.params.cells_per_side)
