@@ -1,0 +1,159 @@
+"""The finite-element tongue verified, and set beside the analytic tissue.
+
+    python scripts/fem_validation.py --out results
+
+Writes results/fem.md (and fem_indentation.png):
+1. the homogeneous stretch of a cube against the closed form, and Hooke's law at small strain;
+2. equilibrium: the base's force against the blade's, for an oblique press;
+3. mesh convergence: the indentation at half the design force (20 N; 16 cells a side do not reach
+   40 N) on 4, 8 and 16 cells a side (``--finest``), and the observed order;
+4. the FE tongue beside the analytic tissue (linear and stiffening laws, same radius, patch and
+   small-strain stiffness): indentation against force, and the surface error between them on the
+   paper's 441-point grid at the design force, by geodesic distance from the contact.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from softenv.fem.tongue import FEParams, FETongue
+from softenv.fem.verification import stretch_unit_cube, uniaxial_closed_form
+from softenv.geometry import geodesic_distance, paper_mesh
+from softenv.tissue import CLINICAL_MAX_FORCE_N, AnalyticTissue, TissueParams
+
+DESIGN = CLINICAL_MAX_FORCE_N
+STEPS = 10
+
+
+def top_indentation(tongue: FETongue, force: float, steps: int = STEPS) -> tuple[np.ndarray, np.ndarray, float]:
+    """Indentation (m) of the top pole at each load step of a vertical press ramped to ``force``."""
+    started = time.perf_counter()
+    solution = tongue.solve([0.0, 0.0, 1.0], [0.0, 0.0, -force], steps=steps)
+    top = int(np.argmax(tongue.points[:, 2]))
+    return solution.fractions * force, -solution.displacements[:, top, 2], time.perf_counter() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="results")
+    parser.add_argument("--finest", type=int, default=16, help="finest mesh of the convergence study (cells a side; "
+                        "it also runs a quarter and half of it)")
+    args = parser.parse_args()
+    started = time.perf_counter()
+    base = FEParams()
+    lines = ["# The finite-element tongue: verification, and the analytic tissue beside it", ""]
+
+    lines += ["## 1. Closed forms", "",
+              f"Unit cube, 2 x 2 x 2 cells, symmetry planes, top face moved (E = {base.E / 1e3:.1f} kPa, "
+              f"nu = {base.nu}): FE against the closed-form uniaxial stretch of the same strain energy.", "",
+              "| stretch | lateral stretch FE | closed form | nominal stress FE (Pa) | closed form | rel. error |",
+              "|---|---|---|---|---|---|"]
+    for stretch in (0.7, 1.3, 1.6, 2.0):
+        lateral, force = stretch_unit_cube(stretch, base, steps=8)
+        want_lateral, want_stress = uniaxial_closed_form(stretch, base)
+        lines.append(f"| {stretch} | {lateral:.10f} | {want_lateral:.10f} | {force:.6g} | {want_stress:.6g} | "
+                     f"{abs(force / want_stress - 1):.1e} |")
+    eps = 1e-6
+    lateral, force = stretch_unit_cube(1.0 + eps, base, steps=1)
+    lines += ["", f"Small strain (1e-6): Young's modulus {force / eps / 1e3:.4f} kPa (set {base.E / 1e3:.4f}), "
+              f"Poisson's ratio {-(lateral - 1) / eps:.5f} (set {base.nu}).", ""]
+
+    tongue8 = FETongue(FEParams(cells_per_side=8))
+    force_vec = np.array([8.0, -4.0, -30.0])
+    press = tongue8.solve([0.3, 0.1, 1.0], force_vec, steps=STEPS)
+    residual = np.abs(press.support + press.fractions[:, None] * force_vec).max()
+    lines += ["## 2. Equilibrium", "",
+              f"Oblique press {force_vec.tolist()} N at (0.3, 0.1, 1) on 8 cells a side: the fixed base pushes back "
+              f"with {press.support[-1].round(9).tolist()} N; the largest imbalance over the {STEPS} load steps is "
+              f"{residual:.1e} N.", ""]
+
+    lines += ["## 3. Mesh convergence", "",
+              f"Indentation of the top pole under {DESIGN / 2:g} N on the patch ({STEPS} load steps; on 16 cells a "
+              f"side the design force's last step does not converge).", "",
+              "| cells a side | nodes | dofs | indentation (mm) | of the radius | solve (s) |", "|---|---|---|---|---|---|"]
+    depths = []
+    for n in (args.finest // 4, args.finest // 2, args.finest):
+        tongue = tongue8 if n == 8 else FETongue(FEParams(cells_per_side=n))
+        forces, depth, seconds = top_indentation(tongue, DESIGN / 2)
+        depths.append(depth[-1])
+        m = len(tongue.points)
+        lines.append(f"| {n} | {m} | {3 * m} | {depth[-1] * 1e3:.4f} | {depth[-1] / base.radius:.3f} | {seconds:.1f} |")
+    fe_forces, fe_depth, _ = top_indentation(tongue8, DESIGN)
+    first, second = depths[1] - depths[0], depths[2] - depths[1]
+    order = math.log2(abs(first / second))                                   # each mesh halves the cell
+    how = ("from one side" if first * second > 0 else
+           "oscillating: the coarsest mesh is too stiff, the finer ones approach from above")
+    lines += ["", f"Differences {1e3 * first:.4f} mm then {1e3 * second:.4f} mm ({how}): observed order "
+              f"{order:.2f} from their sizes; the middle mesh is {100 * abs(second / depths[2]):.1f} % from the "
+              "finest.", ""]
+
+    grid = paper_mesh(441, base.radius)
+    lines += ["## 4. Beside the analytic tissue", "",
+              "Same radius, patch and small-strain stiffness: each analytic law uses the FE tongue's E and nu, so "
+              "the two agree on the compliance of a patch on a half-space. Top-pole indentation (mm):", "",
+              "| force (N) | FE, 8 cells a side | analytic linear | analytic stiffening |", "|---|---|---|---|"]
+    analytic = {law: AnalyticTissue(grid, TissueParams(law=law, E=base.E, nu=base.nu)) for law in ("linear", "stiffening")}
+    top = np.array([[0.0, 0.0, base.radius]])
+    curves = {law: [] for law in analytic}
+    for f, d in zip(fe_forces, fe_depth):
+        row = [f"| {f:.0f} | {d * 1e3:.2f}"]
+        for law, tissue in analytic.items():
+            w = float(tissue.amplitudes(top, np.array([[0.0, 0.0, -f]]))["indentation"][0])
+            curves[law].append(w)
+            row.append(f"{w * 1e3:.2f}")
+        lines.append(" | ".join(row) + " |")
+    fe_surface = tongue8.displacements_at(press.displacements[-1], grid.vertices)
+    contact = np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0]) * base.radius
+    distance = geodesic_distance(grid.vertices, contact[None, :], base.radius).ravel()
+    lines += ["", "Surface displacement on the paper's 441-point grid for the oblique press of section 2 (the FE "
+              "field interpolated with the elements' shape functions), FE against analytic, by geodesic distance "
+              "from the contact (mm):", "",
+              "| distance from the contact (mm) | points | FE mean abs (mm) | linear: RMS difference | stiffening: RMS difference |",
+              "|---|---|---|---|---|"]
+    differences = {law: tissue.displacements(contact[None, :], force_vec[None, :])[0] - fe_surface
+                   for law, tissue in analytic.items()}
+    edges = np.array([0.0, 10.0, 20.0, 40.0, 60.0, 100.0]) * 1e-3
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        rows = (distance >= lo) & (distance < hi)
+        if rows.any():
+            cells = [f"{np.sqrt((differences[law][rows] ** 2).sum(axis=1).mean()) * 1e3:.2f}" for law in analytic]
+            lines.append(f"| {lo * 1e3:.0f}-{hi * 1e3:.0f} | {rows.sum()} | "
+                         f"{np.linalg.norm(fe_surface[rows], axis=1).mean() * 1e3:.2f} | " + " | ".join(cells) + " |")
+    total = {law: np.sqrt((d ** 2).sum(axis=1).mean()) * 1e3 for law, d in differences.items()}
+    lines += ["", f"Over the whole surface: RMS difference {total['linear']:.2f} mm (linear), "
+              f"{total['stiffening']:.2f} mm (stiffening); largest FE displacement "
+              f"{np.linalg.norm(fe_surface, axis=1).max() * 1e3:.2f} mm.", ""]
+    _plot(Path(args.out) / "fem_indentation.png", fe_forces, fe_depth, curves)
+    command = "python " + " ".join(sys.argv)
+    lines += [f"Made by `{command}` in {time.perf_counter() - started:.0f} s "
+              f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}); plot: `fem_indentation.png`.", ""]
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+    (Path(args.out) / "fem.md").write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+def _plot(path: Path, forces: np.ndarray, fe_depth: np.ndarray, curves: dict[str, list[float]]) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    ax.plot(forces, fe_depth * 1e3, "o-", label="FE tongue (neo-Hookean, 8 cells a side)")
+    for law, w in curves.items():
+        ax.plot(forces, np.array(w) * 1e3, "--", label=f"analytic, {law}")
+    ax.set_xlabel("force on the patch (N)")
+    ax.set_ylabel("indentation of the top (mm)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
