@@ -40,7 +40,8 @@ class ForceShapeData:
         forces: ``(N, n_features)`` force vectors in ``layout``'s columns and units.
         shapes: ``(N, 3 n_vertices)`` surfaces (m), flattened ``x1, y1, z1, x2, ...``, noise included.
         contact_ids: ``(N,)`` index of each row's contact point (for held-out-contact splits).
-        mesh, tissue, layout: how the surfaces were made.
+        mesh, tissue, layout: how the surfaces were made (``fe``: the finite-element model's parameters
+            where the surfaces are FE solutions; ``tissue`` then holds its E, nu, radius and patch).
         noise: standard deviation of the white noise added to every coordinate, as a fraction of the radius.
         seed: the seed that drew contact points, loads and noise.
     """
@@ -54,6 +55,7 @@ class ForceShapeData:
     noise: float
     seed: int
     name: str = "dataset"
+    fe: dict | None = None       # the finite-element model's parameters (softenv.fem.FEParams), None: analytic
 
     @property
     def n_samples(self) -> int:
@@ -78,7 +80,8 @@ class ForceShapeData:
         save_artifact(path, DATA_FORMAT, DATA_VERSION,
                       {"forces": self.forces, "shapes": self.shapes, "contact_ids": self.contact_ids},
                       {"mesh": self.mesh.spec(), "tissue": self.tissue.to_dict(),
-                       "layout": self.layout.to_dict(), "noise": self.noise, "seed": self.seed, "name": self.name})
+                       "layout": self.layout.to_dict(), "noise": self.noise, "seed": self.seed, "name": self.name,
+                       **({"fe": self.fe} if self.fe is not None else {})})
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "ForceShapeData":
@@ -90,6 +93,7 @@ class ForceShapeData:
             tissue = TissueParams(**meta["tissue"])
             layout = layout_from_dict(meta["layout"])
             noise, seed, name = float(meta["noise"]), int(meta["seed"]), str(meta["name"])
+            fe = meta.get("fe")
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{str(path)!r} has an invalid header (missing or bad {exc})") from exc
         forces, shapes, ids = arrays["forces"], arrays["shapes"], arrays["contact_ids"]
@@ -97,7 +101,17 @@ class ForceShapeData:
         if forces.shape != (n, layout.n_features) or shapes.shape != (n, 3 * mesh.n_vertices) or ids.shape != (n,):
             raise ValueError(f"{str(path)!r} has inconsistent arrays: forces {forces.shape}, shapes {shapes.shape}, "
                              f"contact_ids {ids.shape} for a {layout.name!r} layout on {mesh.n_vertices} vertices")
-        return cls(forces, shapes, ids, mesh, tissue, layout, noise, seed, name)
+        return cls(forces, shapes, ids, mesh, tissue, layout, noise, seed, name, fe)
+
+
+def paper_contacts(n_deformations: int, cap: float, radius: float, rng: np.random.Generator) -> np.ndarray:
+    """The paper's contact points ``(n_deformations, 3)`` (m): a Fibonacci spiral over the cap within
+    ``cap`` radians of the top, turned by one uniform draw from ``rng``."""
+    i = np.arange(n_deformations) + 0.5
+    z = 1.0 - (1.0 - math.cos(cap)) * i / n_deformations
+    azimuth = math.pi * (3.0 - math.sqrt(5.0)) * i + rng.uniform(0.0, 2.0 * math.pi)
+    r_xy = np.sqrt(1.0 - z ** 2)
+    return radius * np.stack([r_xy * np.cos(azimuth), r_xy * np.sin(azimuth), z], axis=1)
 
 
 def paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes: int = 11, *,
@@ -126,11 +140,7 @@ def paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes: i
     def build() -> ForceShapeData:
         mesh = paper_mesh(n_points, tissue.radius)
         rng = np.random.default_rng(seed)
-        i = np.arange(n_deformations) + 0.5
-        z = 1.0 - (1.0 - math.cos(cap)) * i / n_deformations
-        azimuth = math.pi * (3.0 - math.sqrt(5.0)) * i + rng.uniform(0.0, 2.0 * math.pi)
-        r_xy = np.sqrt(1.0 - z ** 2)
-        contacts = tissue.radius * np.stack([r_xy * np.cos(azimuth), r_xy * np.sin(azimuth), z], axis=1)
+        contacts = paper_contacts(n_deformations, cap, tissue.radius, rng)
         magnitudes = max_force * np.arange(1, n_magnitudes + 1) / n_magnitudes
         forces = np.concatenate([np.repeat(contacts, n_magnitudes, axis=0),
                                  np.tile(magnitudes, n_deformations)[:, None]], axis=1)

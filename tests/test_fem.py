@@ -110,3 +110,47 @@ def test_a_solve_that_fails_names_the_case_and_the_load_step(tongue):
 def test_out_of_range_parameters_are_refused(field, value, allowed):
     with pytest.raises(ValueError, match=rf"{field}.*{allowed}"):
         FEParams(**{field: value})
+
+
+def test_fe_paper_dataset_follows_the_paper_protocol_on_the_fe_tongue(tmp_path, monkeypatch):
+    from softenv.datasets import ForceShapeData, paper_dataset
+    from softenv.fem.data import fe_paper_dataset
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / "cache"))
+    params = FEParams(cells_per_side=4)
+    data = fe_paper_dataset(49, 2, 3, params=params, noise=0.0, echo=None)
+    analytic = paper_dataset(49, 2, 3, noise=0.0, cache=False)
+    assert np.array_equal(data.forces, analytic.forces)                  # same contacts and magnitudes
+    assert data.shapes.shape == (6, 3 * 49) and data.contact_ids.tolist() == [0, 0, 0, 1, 1, 1]
+    # each load step of a ramp is a sample: the second deformation's last sample, solved directly
+    contact = data.forces[3, :3]
+    tongue = FETongue(params)
+    direct = tongue.solve(contact, [0.0, 0.0, -data.forces[5, 3]], steps=3)
+    want = paper_mesh(49, params.radius).vertices + tongue.displacements_at(direct.displacements[-1],
+                                                                            paper_mesh(49, params.radius).vertices)
+    assert np.allclose(data.shapes[5].reshape(-1, 3), want, rtol=0, atol=1e-15)
+    data.save(tmp_path / "fe.npz")
+    again = ForceShapeData.load(tmp_path / "fe.npz")
+    assert again.fe == data.fe and again.fe["cells_per_side"] == 4 and np.array_equal(again.shapes, data.shapes)
+
+
+def test_ramps_resume_from_the_cache_and_workers_agree_bit_for_bit(tmp_path, monkeypatch):
+    from softenv.fem import data as fe_data
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / "a"))
+    params = FEParams(cells_per_side=2)
+    contacts = np.array([[0.0, 0.0, 0.03], [0.0, 0.01, 0.028]])
+    solves = []
+    original = FETongue.solve
+    monkeypatch.setattr(FETongue, "solve", lambda self, *a, **k: solves.append(a) or original(self, *a, **k))
+    failed = r"(?s)1 of 2 FE ramps failed .*ramp 1: \[0.0, 0.0, -100000.0\] N.*load step 1/3"
+    with pytest.raises(NonConvergence, match=failed):
+        fe_data.solve_ramps(params, contacts, np.array([[0.0, 0.0, -5.0], [0.0, 0.0, -1e5]]), 3, 49, echo=None)
+    assert len(solves) == 2
+    # a "killed" generation rerun: the finished ramp is read back, only the other one is solved
+    forces = np.array([[0.0, 0.0, -5.0], [1.0, 0.0, -5.0]])
+    first = fe_data.solve_ramps(params, contacts, forces, 3, 49, echo=None)
+    assert len(solves) == 3
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / "b"))           # nothing cached: two workers solve
+    monkeypatch.setattr(FETongue, "solve", original)
+    assert np.array_equal(fe_data.solve_ramps(params, contacts, forces, 3, 49, jobs=2, echo=None), first)
