@@ -9,7 +9,10 @@ Writes results/fem.md (and fem_indentation.png):
    40 N) on 4, 8 and 16 cells a side (``--finest``), and the observed order;
 4. the FE tongue beside the analytic tissue (linear and stiffening laws, same radius, patch and
    small-strain stiffness): indentation against force, and the surface error between them on the
-   paper's 441-point grid at the design force, by geodesic distance from the contact.
+   paper's 441-point grid at the design force, by geodesic distance from the contact;
+5. the paper's protocol on the FE tongue (10 deformations x 11 magnitudes up to 8 N, each ramp's
+   load steps the samples; ``--jobs`` workers): how many PCA components the scree test and the
+   noise floor keep per number of deformations, at 441 and 961 points, beside the analytic data.
 """
 
 from __future__ import annotations
@@ -22,9 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from softenv.datasets import paper_dataset
+from softenv.fem.data import fe_paper_dataset
 from softenv.fem.tongue import FEParams, FETongue
 from softenv.fem.verification import stretch_unit_cube, uniaxial_closed_form
 from softenv.geometry import geodesic_distance, paper_mesh
+from softenv.shape_model import ShapeModel
 from softenv.tissue import CLINICAL_MAX_FORCE_N, AnalyticTissue, TissueParams
 
 DESIGN = CLINICAL_MAX_FORCE_N
@@ -42,6 +48,7 @@ def top_indentation(tongue: FETongue, force: float, steps: int = STEPS) -> tuple
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="results")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes for the FE data of section 5")
     parser.add_argument("--finest", type=int, default=16, help="finest mesh of the convergence study (cells a side; "
                         "it also runs a quarter and half of it)")
     args = parser.parse_args()
@@ -129,6 +136,22 @@ def main() -> None:
     lines += ["", f"Over the whole surface: RMS difference {total['linear']:.2f} mm (linear), "
               f"{total['stiffening']:.2f} mm (stiffening); largest FE displacement "
               f"{np.linalg.norm(fe_surface, axis=1).max() * 1e3:.2f} mm.", ""]
+    lines += ["## 5. The paper's data on the FE tongue", "",
+              "`softenv.fem.data.fe_paper_dataset` (8 cells a side; the paper's contact points, force straight "
+              "down, 11 magnitudes up to 8 N, noise 1e-5 of the radius) against `softenv.datasets.paper_dataset` "
+              "(analytic, linear law). Components kept by the scree test (the paper's) / the noise floor:", "",
+              "| points | deformations | FE | analytic | FE generation (s) |", "|---|---|---|---|---|"]
+    for n_points in (441, 961):
+        t0 = time.perf_counter()
+        fe_data = fe_paper_dataset(n_points, 10, 11, params=FEParams(cells_per_side=8), jobs=args.jobs, echo=None)
+        seconds = time.perf_counter() - t0
+        an_data = paper_dataset(n_points, 10, 11)
+        for D in (1, 3, 5, 10):
+            k = [[ShapeModel(rule, noise_std=d.noise_std).fit(d.shapes[d.contact_ids < D]).n_components_
+                  for rule in ("scree", "noise")] for d in (fe_data, an_data)]
+            lines.append(f"| {n_points} | {D} | {k[0][0]} / {k[0][1]} | {k[1][0]} / {k[1][1]} | "
+                         f"{f'{seconds:.0f}' if D == 1 else ''} |")
+    lines.append("")
     _plot(Path(args.out) / "fem_indentation.png", fe_forces, fe_depth, curves)
     command = "python " + " ".join(sys.argv)
     lines += [f"Made by `{command}` in {time.perf_counter() - started:.0f} s "
