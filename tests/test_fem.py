@@ -139,18 +139,38 @@ def test_ramps_resume_from_the_cache_and_workers_agree_bit_for_bit(tmp_path, mon
 
     monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / "a"))
     params = FEParams(cells_per_side=2)
+    grid = paper_mesh(49, params.radius)
     contacts = np.array([[0.0, 0.0, 0.03], [0.0, 0.01, 0.028]])
     solves = []
     original = FETongue.solve
     monkeypatch.setattr(FETongue, "solve", lambda self, *a, **k: solves.append(a) or original(self, *a, **k))
     failed = r"(?s)1 of 2 FE ramps failed .*ramp 1: \[0.0, 0.0, -100000.0\] N.*load step 1/3"
     with pytest.raises(NonConvergence, match=failed):
-        fe_data.solve_ramps(params, contacts, np.array([[0.0, 0.0, -5.0], [0.0, 0.0, -1e5]]), 3, 49, echo=None)
+        fe_data.solve_ramps(params, contacts, np.array([[0.0, 0.0, -5.0], [0.0, 0.0, -1e5]]), 3, grid, echo=None)
     assert len(solves) == 2
     # a "killed" generation rerun: the finished ramp is read back, only the other one is solved
     forces = np.array([[0.0, 0.0, -5.0], [1.0, 0.0, -5.0]])
-    first = fe_data.solve_ramps(params, contacts, forces, 3, 49, echo=None)
+    first = fe_data.solve_ramps(params, contacts, forces, 3, grid, echo=None)
     assert len(solves) == 3
     monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / "b"))           # nothing cached: two workers solve
     monkeypatch.setattr(FETongue, "solve", original)
-    assert np.array_equal(fe_data.solve_ramps(params, contacts, forces, 3, 49, jobs=2, echo=None), first)
+    assert np.array_equal(fe_data.solve_ramps(params, contacts, forces, 3, grid, jobs=2, echo=None), first)
+
+
+def test_fe_workspace_dataset_ramps_each_load_at_its_contact_point(tmp_path, monkeypatch):
+    from softenv.fem.data import fe_workspace_dataset
+    from softenv.forces import Workspace
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    params = FEParams(cells_per_side=4)
+    workspace = Workspace((-0.005, -0.004, 5.0, -2.0), (0.005, 0.004, 15.0, 2.0))
+    grid = paper_mesh(49, params.radius)
+    data = fe_workspace_dataset(workspace, grid, params, n_contacts=2, n_loads=2, steps=2, echo=None)
+    assert data.forces.shape == (8, 4) and data.contact_ids.tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
+    ends = data.forces[1::2]                                             # each ramp's last step: inside the box
+    assert (ends >= np.array(workspace.low)).all() and (ends <= np.array(workspace.high)).all()
+    assert np.array_equal(data.forces[0::2, :2], ends[:, :2]) and np.allclose(data.forces[0::2, 2:], ends[:, 2:] / 2)
+    contact, force = data.layout.to_loads(ends[:1])
+    direct = FETongue(params).solve(contact[0], force[0], steps=2)
+    want = grid.vertices + FETongue(params).displacements_at(direct.displacements, grid.vertices)
+    assert np.allclose(data.shapes[:2].reshape(2, -1, 3), want, rtol=0, atol=1e-15)

@@ -23,8 +23,8 @@ from .. import _cache
 from .._artifact import load_artifact, require_arrays, save_artifact
 from .._validation import check_choice, check_int, check_real
 from ..datasets import PAPER_CAP_ANGLE_DEG, PAPER_MAX_FORCE_N, ForceShapeData, paper_contacts
-from ..forces import PaperLayout
-from ..geometry import paper_mesh
+from ..forces import DorsumLayout, PaperLayout, Workspace, sample_workspace
+from ..geometry import SphereMesh, mesh_from_spec, paper_mesh
 from ..parallel import EXECUTORS, Job, run_jobs
 from ..tissue import TissueParams
 from .tongue import FEParams, FETongue, NonConvergence
@@ -40,15 +40,17 @@ def _tongue(params: FEParams) -> FETongue:
 
 
 def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[float, float, float], steps: int,
-            n_points: int, cache: bool = True) -> np.ndarray:
-    """Surface displacements ``(steps, n_points, 3)`` (m) on the paper's ``n_points`` grid for ``force``
-    (N) ramped at ``contact`` (m) in ``steps``; from the cache when this ramp was solved before."""
-    key = {"fe": asdict(params), "contact": list(contact), "force": list(force), "steps": steps, "n_points": n_points}
+            mesh_spec: dict, cache: bool = True) -> np.ndarray:
+    """Surface displacements ``(steps, n_vertices, 3)`` (m) at the vertices of the surface mesh
+    ``mesh_spec`` (:meth:`SphereMesh.spec`) for ``force`` (N) ramped at ``contact`` (m) in ``steps``;
+    from the cache when this ramp was solved before."""
+    key = {"fe": asdict(params), "contact": list(contact), "force": list(force), "steps": steps, "mesh": mesh_spec}
+    vertices = mesh_from_spec(mesh_spec).vertices
 
     def build() -> np.ndarray:
         tongue = _tongue(params)
         solution = tongue.solve(np.asarray(contact), np.asarray(force), steps)
-        return tongue.displacements_at(solution.displacements, paper_mesh(n_points, params.radius).vertices)
+        return tongue.displacements_at(solution.displacements, vertices)
 
     def save(value: np.ndarray, path: Path) -> None:
         save_artifact(path, RAMP_FORMAT, RAMP_VERSION, {"displacements": value}, key)
@@ -56,21 +58,21 @@ def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[
     def load(path: Path) -> np.ndarray:
         arrays, meta = load_artifact(path, RAMP_FORMAT, RAMP_VERSION)
         require_arrays(arrays, ["displacements"], path)
-        if {k: meta.get(k) for k in key} != key or arrays["displacements"].shape != (steps, n_points, 3):
+        if {k: meta.get(k) for k in key} != key or arrays["displacements"].shape != (steps, len(vertices), 3):
             raise ValueError(f"{str(path)!r} holds another ramp (its header or shape differs)")
         return arrays["displacements"]
 
     return _cache.cached("fem-ramp", key, build, load, save, cache)
 
 
-def solve_ramps(params: FEParams, contacts: np.ndarray, forces: np.ndarray, steps: int, n_points: int,
+def solve_ramps(params: FEParams, contacts: np.ndarray, forces: np.ndarray, steps: int, mesh: SphereMesh,
                 jobs: int = 1, executor: str = "local", echo: Callable[[str], None] | None = print) -> np.ndarray:
     """:func:`fe_ramp` for each row of ``contacts`` and ``forces`` ``(R, 3)``, fanned out over ``jobs``
-    workers: ``(R, steps, n_points, 3)``. Raises :class:`NonConvergence` listing every ramp that
+    workers: ``(R, steps, n_vertices, 3)``. Raises :class:`NonConvergence` listing every ramp that
     failed (those that finished stay cached)."""
     check_choice(executor, "executor", EXECUTORS)
     work = [Job(f"ramp {i}: {np.round(f, 3).tolist()} N at {np.round(c / params.radius, 3).tolist()}", fe_ramp,
-                (params, tuple(map(float, c)), tuple(map(float, f)), steps, n_points))
+                (params, tuple(map(float, c)), tuple(map(float, f)), steps, mesh.spec()))
             for i, (c, f) in enumerate(zip(contacts, forces))]
     results = run_jobs(work, executor, jobs, retries=0, echo=echo)
     failed = [f"{r.key}: {r.error}" for r in results if not r.ok]
@@ -98,7 +100,7 @@ def fe_paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes
     rng = np.random.default_rng(seed)
     contacts = paper_contacts(n_deformations, cap, params.radius, rng)
     down = np.tile([0.0, 0.0, -max_force], (n_deformations, 1))
-    ramps = solve_ramps(params, contacts, down, n_magnitudes, n_points, jobs, executor, echo)
+    ramps = solve_ramps(params, contacts, down, n_magnitudes, mesh, jobs, executor, echo)
     shapes = (mesh.vertices + ramps).reshape(n_deformations * n_magnitudes, -1)
     shapes += rng.normal(0.0, noise * params.radius, shapes.shape)
     magnitudes = max_force * np.arange(1, n_magnitudes + 1) / n_magnitudes
@@ -108,3 +110,28 @@ def fe_paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes
     tissue = TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
     return ForceShapeData(forces, shapes, ids, mesh, tissue, PaperLayout(), noise, seed,
                           f"fem-paper-{n_points}pts-{n_deformations}def", fe=asdict(params))
+
+
+def fe_workspace_dataset(workspace: Workspace, mesh: SphereMesh, params: FEParams = FEParams(), *,
+                         n_contacts: int = 64, n_loads: int = 4, steps: int = 4, method: str = "lhs", seed: int = 0,
+                         jobs: int = 1, executor: str = "local",
+                         echo: Callable[[str], None] | None = print) -> ForceShapeData:
+    """A scene's workspace on the FE tongue, in the dorsum layout (insertion, lateral, normal, sideways):
+    ``n_contacts`` contact points x ``n_loads`` final loads, drawn as
+    :func:`softenv.datasets.workspace_dataset` draws its samples; each is one ramp whose ``steps``
+    load steps (the load scaled by ``1..steps / steps`` at its contact point) are the samples."""
+    layout = DorsumLayout(params.radius)
+    if workspace.n_features != layout.n_features:
+        raise ValueError(f"workspace has {workspace.n_features} columns but the dorsum layout has {layout.n_features}")
+    steps = check_int(steps, "steps", 1, 1000)
+    ends, _ = sample_workspace(workspace, n_contacts, n_loads, method, seed)
+    contacts, forces = layout.to_loads(ends)
+    ramps = solve_ramps(params, contacts, forces, steps, mesh, jobs, executor, echo)
+    fractions = np.arange(1, steps + 1) / steps
+    features = np.repeat(ends, steps, axis=0)
+    features[:, 2:] *= np.tile(fractions, len(ends))[:, None]
+    shapes = (mesh.vertices + ramps).reshape(len(ends) * steps, -1)
+    ids = np.repeat(np.arange(n_contacts), n_loads * steps)
+    tissue = TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
+    return ForceShapeData(features, shapes, ids, mesh, tissue, layout, 0.0, seed, "fem-workspace-dorsum",
+                          fe=asdict(params))
