@@ -174,3 +174,13 @@ def test_fe_workspace_dataset_ramps_each_load_at_its_contact_point(tmp_path, mon
     direct = FETongue(params).solve(contact[0], force[0], steps=2)
     want = grid.vertices + FETongue(params).displacements_at(direct.displacements, grid.vertices)
     assert np.allclose(data.shapes[:2].reshape(2, -1, 3), want, rtol=0, atol=1e-15)
+
+
+def test_a_failing_load_step_is_cut_back_and_reaches_the_same_equilibrium():
+    force, contact = [-30.0, 0.0, -30.0], [0.8, 0.0, 0.6]
+    with pytest.raises(NonConvergence, match="load step 1/1"):
+        FETongue(FEParams(cells_per_side=4, cutbacks=0)).solve(contact, force, steps=1)
+    one_step = FETongue(FEParams(cells_per_side=4, cutbacks=3)).solve(contact, force, steps=1)
+    ramp = FETongue(FEParams(cells_per_side=4, cutbacks=0)).solve(contact, force, steps=4)
+    assert len(one_step.fractions) == 1                                   # intermediate loads are not samples
+    assert np.abs(one_step.displacements[-1] - ramp.displacements[-1]).max() < 1e-9 * 0.03   # hyperelastic: same state

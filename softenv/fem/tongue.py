@@ -23,8 +23,9 @@ Model
   rim); 8 cells a side reach it, and 16 reach 20 N.
 * Solve: ``steps`` equal load steps, each by Newton's method on the free degrees of freedom. A Newton
   update is halved until every quadrature point's ``det F`` and every cell's volume ratio stay
-  positive; a step that does not converge raises :class:`NonConvergence` naming the case and the
-  load step reached, and nothing is returned for it.
+  positive; a load step whose Newton solve fails is cut into halves (``cutbacks`` times at most,
+  intermediate loads are not samples); a step that still does not converge raises
+  :class:`NonConvergence` naming the case and the load step reached, and nothing is returned for it.
 
 This module imports FElupe (the ``fem`` extra); nothing on an env's path imports it.
 """
@@ -60,6 +61,7 @@ class FEParams:
     cells_per_side: int = 8                          # hexahedra along the mapped cube's edge
     tol: float = 1e-9                                # Newton: residual norm / load norm
     max_iterations: int = 25                         # Newton iterations per load step
+    cutbacks: int = 3                                # halvings of a load step whose Newton solve fails
 
     def __post_init__(self) -> None:
         check_real(self.radius, "radius", 1e-4, 1.0)
@@ -70,6 +72,7 @@ class FEParams:
         check_int(self.cells_per_side, "cells_per_side", 2, 64)
         check_real(self.tol, "tol", 1e-14, 1e-3)
         check_int(self.max_iterations, "max_iterations", 1, 200)
+        check_int(self.cutbacks, "cutbacks", 0, 10)
 
     @property
     def mu(self) -> float:
@@ -192,10 +195,24 @@ class FETongue:
         load = self.patch_load(contact, force).ravel()
         fractions = np.arange(1, steps + 1) / steps
         out, support, iterations = [], [], []
+
+        def advance(start: float, end: float, what: str, cutbacks: int) -> int:
+            """Newton from the converged load ``start`` to ``end``; where it fails, the increment is halved
+            (``cutbacks`` times at most) and the halves are solved in turn: only ``end`` is a sample."""
+            saved = body.checkpoint()
+            try:
+                return newton(body, field, free_dofs, fixed_dofs, end * load, None, p.tol, p.max_iterations, what)
+            except NonConvergence:
+                if cutbacks == 0:
+                    raise
+                body.restore(saved)
+                middle = (start + end) / 2
+                return advance(start, middle, what, cutbacks - 1) + advance(middle, end, what, cutbacks - 1)
+
         for i, fraction in enumerate(fractions):
-            what = f"force {np.asarray(force).tolist()} N at {np.asarray(contact).tolist()}, load step {i + 1}/{steps}"
-            iterations.append(newton(body, field, free_dofs, fixed_dofs, fraction * load, None, p.tol,
-                                     p.max_iterations, what))
+            what = (f"force {np.asarray(force).tolist()} N at {np.asarray(contact).tolist()}, load step {i + 1}/{steps} "
+                    f"(increments down to 1/{2 ** p.cutbacks} of a step)")
+            iterations.append(advance(fraction - 1 / steps, fraction, what, p.cutbacks))
             internal = np.asarray(body.assemble.vector(field).todense()).reshape(-1, 3)
             support.append(internal[self.cap].sum(axis=0))
             out.append(field[0].values.copy())
