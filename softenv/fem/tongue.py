@@ -22,8 +22,9 @@ Model
   10 load steps) is not reached (the last step's Newton updates invert elements under the patch's
   rim); 8 cells a side reach it, and 16 reach 20 N.
 * Solve: ``steps`` equal load steps, each by Newton's method on the free degrees of freedom. A Newton
-  update is halved until every quadrature point's ``det F`` and every cell's volume ratio stay
-  positive; a load step whose Newton solve fails is cut into halves (``cutbacks`` times at most,
+  update moves no node more than a quarter cell (a trust region: far from the solution, full steps
+  overshoot into folded states) and is halved until every quadrature point's ``det F`` and every
+  cell's volume ratio stay positive; a load step whose Newton solve fails is cut into halves (``cutbacks`` times at most,
   intermediate loads are not samples); a step that still does not converge raises
   :class:`NonConvergence` naming the case and the load step reached, and nothing is returned for it.
 
@@ -38,7 +39,7 @@ from dataclasses import dataclass
 import felupe as fe
 import numpy as np
 
-from .._validation import check_int, check_real
+from .._validation import check_finite, check_int, check_real, real_array
 from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_RADIUS_M, effective_modulus
 from .mesh import ball_mesh, ball_to_cube, base_cap, interpolate_nodal, surface_nodes
 
@@ -60,7 +61,7 @@ class FEParams:
     cap_deg: float = 90.0                            # deg, half-angle of the fixed base cap
     cells_per_side: int = 8                          # hexahedra along the mapped cube's edge
     tol: float = 1e-9                                # Newton: residual norm / load norm
-    max_iterations: int = 25                         # Newton iterations per load step
+    max_iterations: int = 60                         # Newton iterations per load step (or cut-back part)
     cutbacks: int = 3                                # halvings of a load step whose Newton solve fails
 
     def __post_init__(self) -> None:
@@ -104,13 +105,15 @@ def _inverted(body: fe.SolidBodyNearlyIncompressible) -> bool:
 
 
 def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, free: np.ndarray, fixed: np.ndarray,
-           external: np.ndarray, imposed: np.ndarray | None, tol: float, max_iterations: int, what: str) -> int:
+           external: np.ndarray, imposed: np.ndarray | None, tol: float, max_iterations: int, what: str,
+           max_move: float = math.inf) -> int:
     """Solve ``f_int(u) = external`` on the ``free`` dofs, the ``fixed`` ones moved to ``imposed``
     (their current values where None), in place. The imposed motion enters through the first Newton
     update, so the free dofs follow it at once.
 
     Converged when the free dofs' residual is ``tol`` of the forces in play (the load, or the fixed
-    dofs' reactions). Line search: an update is halved until no element inverts (every quadrature
+    dofs' reactions). Globalisation: once the fixed dofs are in place an update is scaled so that no
+    node moves more than ``max_move`` (m), then halved until no element inverts (every quadrature
     point's ``det F > 0`` and every cell's volume ratio ``J > 0``). Returns the iterations taken; raises :class:`NonConvergence` naming ``what`` otherwise.
     """
     imposed = _values(field)[fixed] if imposed is None else imposed
@@ -129,7 +132,9 @@ def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, fre
         system = fe.solve.partition(field, body.assemble.matrix(field), free, fixed, r=residual)
         du = fe.solve.solve(*system, ext0=imposed)
         saved = body.checkpoint()
-        alpha = 1.0
+        # a trust region: no node moves more than a quarter cell in one update (far from the solution,
+        # full Newton steps overshoot into folded states that no halving recovers from)
+        alpha = min(1.0, max_move / max(float(np.abs(du[free]).max()), 1e-300)) if in_place else 1.0
         while True:
             field += alpha * du
             with np.errstate(invalid="ignore"):                 # an inverted trial is refused just below
@@ -188,6 +193,12 @@ class FETongue:
     def solve(self, contact: np.ndarray, force: np.ndarray, steps: int = 5) -> FESolution:
         """Ramp ``force`` (N) on the patch at ``contact`` (a direction from the centre) in ``steps``."""
         steps = check_int(steps, "steps", 1, 1000)
+        contact = real_array(contact, "contact", (3,)).astype(float)
+        force = real_array(force, "force", (3,)).astype(float)
+        check_finite(contact, "contact")
+        check_finite(force, "force")
+        if not np.linalg.norm(contact) > 0.0:
+            raise ValueError(f"contact={contact.tolist()} must be a nonzero direction from the centre")
         p = self.params
         field = fe.FieldContainer([fe.Field(self.region, dim=3)])
         body = fe.SolidBodyNearlyIncompressible(fe.NeoHooke(mu=p.mu), field, bulk=p.bulk)
@@ -201,7 +212,8 @@ class FETongue:
             (``cutbacks`` times at most) and the halves are solved in turn: only ``end`` is a sample."""
             saved = body.checkpoint()
             try:
-                return newton(body, field, free_dofs, fixed_dofs, end * load, None, p.tol, p.max_iterations, what)
+                return newton(body, field, free_dofs, fixed_dofs, end * load, None, p.tol, p.max_iterations, what,
+                              max_move=0.25 * 2.0 * p.radius / p.cells_per_side)
             except NonConvergence:
                 if cutbacks == 0:
                     raise
@@ -210,7 +222,7 @@ class FETongue:
                 return advance(start, middle, what, cutbacks - 1) + advance(middle, end, what, cutbacks - 1)
 
         for i, fraction in enumerate(fractions):
-            what = (f"force {np.asarray(force).tolist()} N at {np.asarray(contact).tolist()}, load step {i + 1}/{steps} "
+            what = (f"force {force.tolist()} N at {contact.tolist()}, load step {i + 1}/{steps} "
                     f"(increments down to 1/{2 ** p.cutbacks} of a step)")
             iterations.append(advance(fraction - 1 / steps, fraction, what, p.cutbacks))
             internal = np.asarray(body.assemble.vector(field).todense()).reshape(-1, 3)
