@@ -114,7 +114,8 @@ def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, fre
     Converged when the free dofs' residual is ``tol`` of the forces in play (the load, or the fixed
     dofs' reactions). Globalisation: once the fixed dofs are in place an update is scaled so that no
     node moves more than ``max_move`` (m), then halved until no element inverts (every quadrature
-    point's ``det F > 0`` and every cell's volume ratio ``J > 0``). Returns the iterations taken; raises :class:`NonConvergence` naming ``what`` otherwise.
+    point's ``det F > 0`` and every cell's volume ratio ``J > 0``). Returns the iterations taken;
+    raises :class:`NonConvergence` naming ``what`` otherwise.
     """
     imposed = _values(field)[fixed] if imposed is None else imposed
     norm = scale = math.nan
@@ -132,8 +133,8 @@ def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, fre
         system = fe.solve.partition(field, body.assemble.matrix(field), free, fixed, r=residual)
         du = fe.solve.solve(*system, ext0=imposed)
         saved = body.checkpoint()
-        # a trust region: no node moves more than a quarter cell in one update (far from the solution,
-        # full Newton steps overshoot into folded states that no halving recovers from)
+        # a trust region: no node moves more than max_move in one update (far from the solution, full
+        # Newton steps overshoot into folded states that no halving recovers from)
         alpha = min(1.0, max_move / max(float(np.abs(du[free]).max()), 1e-300)) if in_place else 1.0
         while True:
             field += alpha * du
