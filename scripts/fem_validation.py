@@ -12,7 +12,10 @@ Writes results/fem.md (and fem_indentation.png):
    paper's 441-point grid at the design force, by geodesic distance from the contact;
 5. the paper's protocol on the FE tongue (10 deformations x 11 magnitudes up to 8 N, each ramp's
    load steps the samples; ``--jobs`` workers): how many PCA components the scree test and the
-   noise floor keep per number of deformations, at 441 and 961 points, beside the analytic data.
+   noise floor keep per number of deformations, at 441 and 961 points, beside the analytic data;
+6. the paper's regressors on those FE data beside the analytic data: surface error against the
+   haptic update's run time, random rows and held-out contacts (scripts/evaluate_regressors.py's
+   evaluation, ``--seeds`` seeds).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from softenv.datasets import paper_dataset
+from softenv.datasets import paper_dataset, split_by_contact, split_rows
 from softenv.fem.data import fe_paper_dataset
 from softenv.fem.tongue import FEParams, FETongue
 from softenv.fem.verification import stretch_unit_cube, uniaxial_closed_form
@@ -48,7 +51,8 @@ def top_indentation(tongue: FETongue, force: float, steps: int = STEPS) -> tuple
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="results")
-    parser.add_argument("--jobs", type=int, default=2, help="worker processes for the FE data of section 5")
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes for the FE data of sections 5-6")
+    parser.add_argument("--seeds", type=int, default=2, help="data seeds of section 6")
     parser.add_argument("--finest", type=int, default=16, help="finest mesh of the convergence study (cells a side; "
                         "it also runs a quarter and half of it)")
     args = parser.parse_args()
@@ -152,6 +156,7 @@ def main() -> None:
             lines.append(f"| {n_points} | {D} | {k[0][0]} / {k[0][1]} | {k[1][0]} / {k[1][1]} | "
                          f"{f'{seconds:.0f}' if D == 1 else ''} |")
     lines.append("")
+    lines += regressor_section(args.seeds, args.jobs)
     _plot(Path(args.out) / "fem_indentation.png", fe_forces, fe_depth, curves)
     command = "python " + " ".join(sys.argv)
     lines += [f"Made by `{command}` in {time.perf_counter() - started:.0f} s "
@@ -159,6 +164,40 @@ def main() -> None:
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "fem.md").write_text("\n".join(lines))
     print("\n".join(lines))
+
+
+def regressor_section(seeds: int, jobs: int) -> list[str]:
+    """Section 6: the paper's regressors on FE and analytic paper data (441 points), same evaluation."""
+    from evaluate_regressors import evaluate_one        # this script's neighbour: one evaluation for both
+
+    models = ["poly1", "poly2", "poly3", "anfis", "mlp"]
+    rows = []
+    for seed in range(seeds):
+        sources = {"FE": fe_paper_dataset(441, 10, 11, params=FEParams(cells_per_side=8), seed=seed, jobs=jobs,
+                                          echo=None),
+                   "analytic": paper_dataset(441, 10, 11, seed=seed)}
+        for source, data in sources.items():
+            for split_name in ("rows", "contacts"):
+                split = (split_rows(data.n_samples, seed=seed) if split_name == "rows"
+                         else split_by_contact(data.contact_ids, seed=seed))
+                shape_model = ShapeModel("scree", noise_std=data.noise_std).fit(data.shapes[split.train], data.mesh)
+                for name in models:
+                    row, _ = evaluate_one(name, data, split, shape_model, seed, quick=True)
+                    rows.append(dict(row, source=source, split=split_name))
+    lines = ["## 6. The paper's regressors on FE data", "",
+             f"441 points, 10 deformations x 11 magnitudes, {seeds} data seeds (mean over seeds); the shape model "
+             "(scree) and the regressors are fitted on the training rows; surface RMSE of the decoded prediction "
+             "on the test rows (mm) and the haptic update (predict + decode, us).", "",
+             "| model | FE, random rows | analytic, random rows | FE, held-out contacts | analytic, held-out contacts "
+             "| haptic update on FE (us) |", "|---|---|---|---|---|---|"]
+    for name in models:
+        def mean(source: str, split: str, key: str = "rmse_mm") -> float:
+            return float(np.mean([r[key] for r in rows if r["model"] == name and r["source"] == source
+                                  and r["split"] == split]))
+        lines.append(f"| {name} | {mean('FE', 'rows'):.3f} | {mean('analytic', 'rows'):.3f} | "
+                     f"{mean('FE', 'contacts'):.3f} | {mean('analytic', 'contacts'):.3f} | "
+                     f"{mean('FE', 'rows', 'haptic_us'):.0f} |")
+    return lines + [""]
 
 
 def _plot(path: Path, forces: np.ndarray, fe_depth: np.ndarray, curves: dict[str, list[float]]) -> None:
