@@ -114,6 +114,15 @@ def paper_contacts(n_deformations: int, cap: float, radius: float, rng: np.rando
     return radius * np.stack([r_xy * np.cos(azimuth), r_xy * np.sin(azimuth), z], axis=1)
 
 
+def paper_forces(contacts: np.ndarray, n_magnitudes: int, max_force: float) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's force vectors ``(x, y, z, F)`` (:class:`PaperLayout`): each contact point with the
+    magnitudes ``max_force * (1..n_magnitudes) / n_magnitudes``, and each row's contact index."""
+    magnitudes = max_force * np.arange(1, n_magnitudes + 1) / n_magnitudes
+    forces = np.concatenate([np.repeat(contacts, n_magnitudes, axis=0),
+                             np.tile(magnitudes, len(contacts))[:, None]], axis=1)
+    return forces, np.repeat(np.arange(len(contacts)), n_magnitudes)
+
+
 def paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes: int = 11, *,
                   law: str = "linear", noise: float = 1e-5, seed: int = 0,
                   max_force: float = PAPER_MAX_FORCE_N, cap_angle_deg: float = PAPER_CAP_ANGLE_DEG,
@@ -141,13 +150,10 @@ def paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes: i
         mesh = paper_mesh(n_points, tissue.radius)
         rng = np.random.default_rng(seed)
         contacts = paper_contacts(n_deformations, cap, tissue.radius, rng)
-        magnitudes = max_force * np.arange(1, n_magnitudes + 1) / n_magnitudes
-        forces = np.concatenate([np.repeat(contacts, n_magnitudes, axis=0),
-                                 np.tile(magnitudes, n_deformations)[:, None]], axis=1)
+        forces, ids = paper_forces(contacts, n_magnitudes, max_force)
         layout = PaperLayout()
         shapes = AnalyticTissue(mesh, tissue).surfaces(*layout.to_loads(forces))
         shapes += rng.normal(0.0, noise * tissue.radius, shapes.shape)
-        ids = np.repeat(np.arange(n_deformations), n_magnitudes)
         return ForceShapeData(forces, shapes, ids, mesh, tissue, layout, noise, seed,
                               f"paper-{n_points}pts-{n_deformations}def-{law}")
 

@@ -22,7 +22,7 @@ import numpy as np
 from .. import _cache
 from .._artifact import load_artifact, require_arrays, save_artifact
 from .._validation import check_choice, check_int, check_real
-from ..datasets import PAPER_CAP_ANGLE_DEG, PAPER_MAX_FORCE_N, ForceShapeData, paper_contacts
+from ..datasets import PAPER_CAP_ANGLE_DEG, PAPER_MAX_FORCE_N, ForceShapeData, paper_contacts, paper_forces
 from ..forces import DorsumLayout, PaperLayout, Workspace, sample_workspace
 from ..geometry import SphereMesh, mesh_from_spec, paper_mesh
 from ..parallel import EXECUTORS, Job, run_jobs
@@ -37,6 +37,11 @@ RAMP_VERSION = 1
 def _tongue(params: FEParams) -> FETongue:
     """One mesh and its regions per process and parameter set (ramps in a worker share it)."""
     return FETongue(params)
+
+
+def _tissue(params: FEParams) -> TissueParams:
+    """The data set header's tissue: the FE tongue's small-strain E, nu, radius and patch."""
+    return TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
 
 
 def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[float, float, float], steps: int,
@@ -56,10 +61,12 @@ def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[
         save_artifact(path, RAMP_FORMAT, RAMP_VERSION, {"displacements": value}, key)
 
     def load(path: Path) -> np.ndarray:
-        arrays, meta = load_artifact(path, RAMP_FORMAT, RAMP_VERSION)
+        # the cache reads an entry only when its build digest is this ramp's; here format and shape
+        arrays, _ = load_artifact(path, RAMP_FORMAT, RAMP_VERSION)
         require_arrays(arrays, ["displacements"], path)
-        if {k: meta.get(k) for k in key} != key or arrays["displacements"].shape != (steps, len(vertices), 3):
-            raise ValueError(f"{str(path)!r} holds another ramp (its header or shape differs)")
+        if arrays["displacements"].shape != (steps, len(vertices), 3):
+            raise ValueError(f"{str(path)!r} holds displacements of shape {arrays['displacements'].shape}, not "
+                             f"{(steps, len(vertices), 3)}")
         return arrays["displacements"]
 
     return _cache.cached("fem-ramp", key, build, load, save, cache)
@@ -103,12 +110,8 @@ def fe_paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes
     ramps = solve_ramps(params, contacts, down, n_magnitudes, mesh, jobs, executor, echo)
     shapes = (mesh.vertices + ramps).reshape(n_deformations * n_magnitudes, -1)
     shapes += rng.normal(0.0, noise * params.radius, shapes.shape)
-    magnitudes = max_force * np.arange(1, n_magnitudes + 1) / n_magnitudes
-    forces = np.concatenate([np.repeat(contacts, n_magnitudes, axis=0),
-                             np.tile(magnitudes, n_deformations)[:, None]], axis=1)
-    ids = np.repeat(np.arange(n_deformations), n_magnitudes)
-    tissue = TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
-    return ForceShapeData(forces, shapes, ids, mesh, tissue, PaperLayout(), noise, seed,
+    forces, ids = paper_forces(contacts, n_magnitudes, max_force)
+    return ForceShapeData(forces, shapes, ids, mesh, _tissue(params), PaperLayout(), noise, seed,
                           f"fem-paper-{n_points}pts-{n_deformations}def", fe=asdict(params))
 
 
@@ -132,6 +135,5 @@ def fe_workspace_dataset(workspace: Workspace, mesh: SphereMesh, params: FEParam
     features[:, 2:] *= np.tile(fractions, len(ends))[:, None]
     shapes = (mesh.vertices + ramps).reshape(len(ends) * steps, -1)
     ids = np.repeat(np.arange(n_contacts), n_loads * steps)
-    tissue = TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
-    return ForceShapeData(features, shapes, ids, mesh, tissue, layout, 0.0, seed, "fem-workspace-dorsum",
+    return ForceShapeData(features, shapes, ids, mesh, _tissue(params), layout, 0.0, seed, "fem-workspace-dorsum",
                           fe=asdict(params))

@@ -106,7 +106,7 @@ def _inverted(body: fe.SolidBodyNearlyIncompressible) -> bool:
 
 def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, free: np.ndarray, fixed: np.ndarray,
            external: np.ndarray, imposed: np.ndarray | None, tol: float, max_iterations: int, what: str,
-           max_move: float = math.inf) -> int:
+           max_move: float = math.inf) -> tuple[int, np.ndarray]:
     """Solve ``f_int(u) = external`` on the ``free`` dofs, the ``fixed`` ones moved to ``imposed``
     (their current values where None), in place. The imposed motion enters through the first Newton
     update, so the free dofs follow it at once.
@@ -114,8 +114,9 @@ def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, fre
     Converged when the free dofs' residual is ``tol`` of the forces in play (the load, or the fixed
     dofs' reactions). Globalisation: once the fixed dofs are in place an update is scaled so that no
     node moves more than ``max_move`` (m), then halved until no element inverts (every quadrature
-    point's ``det F > 0`` and every cell's volume ratio ``J > 0``). Returns the iterations taken;
-    raises :class:`NonConvergence` naming ``what`` otherwise.
+    point's ``det F > 0`` and every cell's volume ratio ``J > 0``). Returns the iterations taken and
+    the converged internal force vector (its fixed dofs are the supports' reactions); raises
+    :class:`NonConvergence` naming ``what`` otherwise.
     """
     imposed = _values(field)[fixed] if imposed is None else imposed
     norm = scale = math.nan
@@ -129,7 +130,7 @@ def newton(body: fe.SolidBodyNearlyIncompressible, field: fe.FieldContainer, fre
         if not math.isfinite(norm) or iteration == max_iterations:
             break
         if norm <= tol * scale and in_place:
-            return iteration
+            return iteration, internal
         system = fe.solve.partition(field, body.assemble.matrix(field), free, fixed, r=residual)
         du = fe.solve.solve(*system, ext0=imposed)
         saved = body.checkpoint()
@@ -171,7 +172,8 @@ class FETongue:
         # the surface's quadrature points: hexahedron shape functions at its faces' Gauss points
         self._face_cells = boundary.mesh.cells                               # (faces, 8)
         self._face_h = boundary.h[:, :, 0]                                   # (8, q)
-        self._face_x = np.einsum("aq,fai->fqi", self._face_h, points[self._face_cells])
+        face_x = np.einsum("aq,fai->fqi", self._face_h, points[self._face_cells])
+        self._face_dir = face_x / np.linalg.norm(face_x, axis=-1, keepdims=True)  # (faces, q, 3) unit
         self._face_area = np.linalg.norm(boundary.dA, axis=0).T             # (faces, q)
 
     def patch_load(self, contact: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -179,7 +181,7 @@ class FETongue:
         p = self.params
         c = np.asarray(contact, dtype=float)
         c = c / np.linalg.norm(c)
-        cosine = np.clip(self._face_x @ c / np.linalg.norm(self._face_x, axis=-1), -1.0, 1.0)
+        cosine = np.clip(self._face_dir @ c, -1.0, 1.0)
         inside = np.arccos(cosine) * p.radius <= p.patch_radius
         weight = self._face_area * inside
         total = weight.sum()
@@ -208,9 +210,10 @@ class FETongue:
         fractions = np.arange(1, steps + 1) / steps
         out, support, iterations = [], [], []
 
-        def advance(start: float, end: float, what: str, cutbacks: int) -> int:
+        def advance(start: float, end: float, what: str, cutbacks: int) -> tuple[int, np.ndarray]:
             """Newton from the converged load ``start`` to ``end``; where it fails, the increment is halved
-            (``cutbacks`` times at most) and the halves are solved in turn: only ``end`` is a sample."""
+            (``cutbacks`` times at most) and the halves are solved in turn: only ``end`` is a sample.
+            Returns the iterations and the internal forces at ``end``."""
             saved = body.checkpoint()
             try:
                 return newton(body, field, free_dofs, fixed_dofs, end * load, None, p.tol, p.max_iterations, what,
@@ -220,14 +223,16 @@ class FETongue:
                     raise
                 body.restore(saved)
                 middle = (start + end) / 2
-                return advance(start, middle, what, cutbacks - 1) + advance(middle, end, what, cutbacks - 1)
+                first, _ = advance(start, middle, what, cutbacks - 1)
+                second, internal = advance(middle, end, what, cutbacks - 1)
+                return first + second, internal
 
         for i, fraction in enumerate(fractions):
             what = (f"force {force.tolist()} N at {contact.tolist()}, load step {i + 1}/{steps} "
                     f"(increments down to 1/{2 ** p.cutbacks} of a step)")
-            iterations.append(advance(fraction - 1 / steps, fraction, what, p.cutbacks))
-            internal = np.asarray(body.assemble.vector(field).todense()).reshape(-1, 3)
-            support.append(internal[self.cap].sum(axis=0))
+            count, internal = advance(fraction - 1 / steps, fraction, what, p.cutbacks)
+            iterations.append(count)
+            support.append(internal.reshape(-1, 3)[self.cap].sum(axis=0))
             out.append(field[0].values.copy())
         return FESolution(fractions, np.array(out), np.array(support), iterations)
 
