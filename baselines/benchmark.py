@@ -3,8 +3,8 @@ bootstrap intervals, a CSV, an error-against-decision-time plot, learning curves
 
 Quick mode (``--quick``): every baseline on SoftSphere-v0 and on SoftSphereHaptic-v0 (the
 laryngoscope), and the four agents trained briefly in this run on SoftSphere-v0, one seed each
-(budgets printed); under 3 minutes on two cores. Full mode: the eight scenes (six ideal-device, two
-laryngoscope), every baseline that applies to the scene's device, the four agents with their YAML
+(budgets printed); under 3 minutes on two cores. Full mode: the nine scenes (seven ideal-device, one
+of them on the FE tongue, two laryngoscope), every baseline that applies to the scene's device, the four agents with their YAML
 budgets over 5 training seeds on SoftSphere-v0 and SoftSphereHaptic-v0 and 3 elsewhere.
 """
 

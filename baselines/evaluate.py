@@ -17,7 +17,8 @@ METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", 
 CLINICAL = ("peak_tongue_force_N", "mean_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N",
             "incisor_contact_s", "lever_share", "duration_s", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
 
-# benchmark scenes: name -> (env id, scene overrides); nonlinear variants where the law matters
+# benchmark scenes: name -> (env id, scene overrides); nonlinear variants where the law matters, and the
+# default scene on the finite-element tongue (its shipped data)
 SCENES: dict[str, tuple[str, dict[str, Any]]] = {
     "SoftSphere-v0": ("SoftSphere-v0", {}),
     "SoftSphere-v0/stiffening": ("SoftSphere-v0", {"tissue": {"law": "stiffening"}}),
@@ -27,6 +28,7 @@ SCENES: dict[str, tuple[str, dict[str, Any]]] = {
     "SoftSphereProcedure-v0/stiffening": ("SoftSphereProcedure-v0", {"tissue": {"law": "stiffening"}}),
     "SoftSphereHaptic-v0": ("SoftSphereHaptic-v0", {}),
     "SoftSphereHapticProcedure-v0": ("SoftSphereHapticProcedure-v0", {}),
+    "SoftSphere-v0/fem": ("SoftSphere-v0", {"tissue": {"model": "fem"}}),     # the finite-element tongue
 }
 
 

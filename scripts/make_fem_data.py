@@ -1,55 +1,81 @@
-"""Generate the FE workspace data of a scene (the default: SoftSphere-v0's) and time it.
+"""Generate the FE data a tissue.model="fem" scene reads, and time it (the shipped file is made by the
+default command):
 
-    python scripts/make_fem_data.py --out results/fem-data --jobs 2
+    python scripts/make_fem_data.py --jobs 2
 
-Solves ``--contacts`` x ``--loads`` ramps of ``--steps`` load steps on the FE tongue over the scene's
-device workspace, sampled on the scene's surface mesh (softenv.fem.data.fe_workspace_dataset), and
-writes ``fem_workspace.npz`` (a ForceShapeData) and ``fem_workspace.md`` (sizes, time, command).
-Ramps are cached one by one: a stopped run, started again, solves only what is missing.
+For the scene of ``--env-id`` with ``tissue={"model": "fem"}`` (its workspace sample, held-out solves
+and contact curve, softenv.fem.data.fe_scene_data), writes ``<out>/<env-id>.npz`` (default out:
+softenv/fem/shipped, where scenes find it by its header) and ``<report>`` (sizes, time, array digest,
+command). Ramps are cached one by one: a stopped run, started again, solves only what is missing;
+``--fresh`` uses an empty cache, to time (and check the bits of) a regeneration from nothing.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
-import gymnasium as gym
+import numpy as np
 
-import softenv  # noqa: F401  (registers the ids)
-from softenv.fem.data import fe_workspace_dataset
-from softenv.fem.tongue import FEParams
+
+def array_digest(path: Path) -> str:
+    """sha256 over the file's arrays (names and bytes): equal for bitwise-equal data."""
+    digest = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as data:
+        for name in sorted(n for n in data.files if n != "__meta__"):
+            digest.update(name.encode() + np.ascontiguousarray(data[name]).tobytes())
+    return digest.hexdigest()
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="results/fem-data")
     parser.add_argument("--env-id", default="SoftSphere-v0")
-    parser.add_argument("--contacts", type=int, default=64)
-    parser.add_argument("--loads", type=int, default=4)
-    parser.add_argument("--steps", type=int, default=4)
-    parser.add_argument("--cells", type=int, default=8, help="hexahedra along the mapped cube's edge")
+    parser.add_argument("--out", default="softenv/fem/shipped")
+    parser.add_argument("--report", default="results/fem-data.md")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--executor", default="local", choices=["local", "ray"])
+    parser.add_argument("--fresh", action="store_true", help="solve every ramp again (an empty cache)")
     args = parser.parse_args()
-    scene = gym.make(args.env_id).unwrapped.world.scene
-    params = FEParams(radius=scene.tissue.radius, patch_radius=scene.tissue.patch_radius, cells_per_side=args.cells)
+    if args.fresh:
+        os.environ["SOFTENV_CACHE_DIR"] = tempfile.mkdtemp(prefix="softenv-fem-")   # before softenv reads it
+
+    from softenv.envs import ENV_SCENES, HAPTIC_SCENES
+    from softenv.envs.config import scene_config
+    from softenv.envs.scene import device_workspace, fe_request
+    from softenv.fem.data import fe_scene_data
+    from softenv.geometry import make_mesh
+
+    config = scene_config({**ENV_SCENES, **HAPTIC_SCENES}[args.env_id], {"tissue": {"model": "fem"}})
+    mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], config["tissue"]["radius"])
+    request = fe_request(config, mesh, device_workspace(config))
     started = time.perf_counter()
-    data = fe_workspace_dataset(scene.workspace, scene.mesh, params, n_contacts=args.contacts, n_loads=args.loads,
-                                steps=args.steps, jobs=args.jobs, executor=args.executor)
+    data = fe_scene_data(request, jobs=args.jobs, executor=args.executor)
     seconds = time.perf_counter() - started
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    data.save(out / "fem_workspace.npz")
-    size = (out / "fem_workspace.npz").stat().st_size
-    text = (f"# FE workspace data of {args.env_id}\n\n{args.contacts} contact points x {args.loads} loads = "
-            f"{args.contacts * args.loads} ramps of {args.steps} load steps: {data.n_samples} samples on "
-            f"{scene.mesh.n_vertices} vertices, FE tongue of {args.cells} cells a side (E = {params.E / 1e3:.1f} kPa, "
-            f"nu = {params.nu}).\n\nSolved in {seconds:.0f} s over {args.jobs} {args.executor} workers; "
-            f"`fem_workspace.npz` is {size / 1e6:.1f} MB.\n\nMade by `python {' '.join(sys.argv)}` "
-            f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
-    (out / "fem_workspace.md").write_text(text)
+    path = Path(args.out) / f"{args.env_id}.npz"
+    data.save(path)
+    size = path.stat().st_size
+    fe = request.fe
+    text = (f"# FE data of {args.env_id} with tissue.model='fem'\n\n"
+            f"FE tongue: {fe.cells_per_side} cells a side, E = {fe.E / 1e3:.1f} kPa, nu = {fe.nu}, radius "
+            f"{fe.radius * 1e3:g} mm, patch {fe.patch_radius * 1e3:g} mm, base cap {fe.cap_deg:g} deg.\n\n"
+            f"- workspace sample: {request.n_contacts} contact points x {request.n_loads} loads = "
+            f"{request.n_contacts * request.n_loads} ramps of {request.steps} load steps: {data.train.n_samples} samples "
+            f"on {mesh.n_vertices} vertices\n"
+            f"- held-out solves: {request.n_test_contacts} other contact points x {request.n_loads} loads = "
+            f"{data.test.n_samples} samples\n"
+            f"- contact curve: {request.curve_steps} load steps to {request.high[2]:g} N at the top: indentation "
+            f"{data.curve_depths[-1] * 1e3:.2f} mm; lateral compliance {data.lateral_compliance * 1e3:.3f} mm/N\n\n"
+            f"Solved in {seconds:.0f} s over {args.jobs} {args.executor} workers"
+            f"{' from an empty cache' if args.fresh else ''} on {os.cpu_count()} cores; `{path}` is "
+            f"{size / 1e6:.1f} MB; array sha256 `{array_digest(path)}`.\n\n"
+            f"Made by `python {' '.join(sys.argv)}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
+    Path(args.report).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.report).write_text(text)
     print(text)
 
 

@@ -95,6 +95,20 @@ def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dic
     return arrays, meta
 
 
+def artifact_header(path: str | os.PathLike, kind: str, version: int) -> dict[str, Any]:
+    """The header of an artifact without reading its arrays, checked as :func:`load_artifact` checks it."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data[_META_KEY][()]))
+    except (zipfile.BadZipFile, OSError, EOFError, json.JSONDecodeError, KeyError, ValueError) as exc:
+        raise ValueError(f"{str(path)!r} is corrupt or not a softenv artifact: {exc}") from exc
+    if not isinstance(meta, dict) or meta.get("kind") != kind or meta.get("format_version") != version:
+        found = (meta.get("kind"), meta.get("format_version")) if isinstance(meta, dict) else meta
+        raise ValueError(f"{str(path)!r} holds {found!r}; expected a {kind!r} artifact of format_version={version}")
+    return meta
+
+
 def require_arrays(arrays: dict[str, np.ndarray], names: list[str], path: str | os.PathLike) -> None:
     """Raise if an artifact lacks one of the arrays its loader needs."""
     missing = [n for n in names if n not in arrays]

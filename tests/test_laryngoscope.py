@@ -58,7 +58,7 @@ def test_a_held_press_reaches_the_analytic_tissues_static_indentation(law):
 
 def test_contact_law_inverts_the_indentation_and_its_potential_integrates_it():
     world = make_world(tissue={"law": "stiffening"})
-    law = TongueContact(world.scene.tissue, world.scene.mesh, 40.0, 0.5)
+    law = TongueContact(world.scene.contact_curve(40.0), 0.5)
     loads = np.array([0.5, 5.0, 20.0, 40.0, 80.0])
     np.testing.assert_allclose(law.load(law.indentation(loads)), loads, rtol=1e-3)
     assert law.load(np.array([-1e-3, 0.0]))[0] == 0.0

@@ -21,7 +21,7 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
     rows.append(Row("env", "SoftSphere-v0: first gym.make in this process (scene from the disk cache or built)",
                     time.perf_counter() - t0, "s"))
     scene = env.unwrapped.world.scene
-    err = scene.table_error(n=500)
+    err = scene.response_error(n=500)
     rows.append(Row("env", "exact response: table vs direct analytic tissue, surface RMS error",
                     err["median_mm"], "mm (median)", f"p99 {err['p99_mm']:.4f}, max {err['max_mm']:.4f} mm",
                     extra={"nodes": list(scene.response.nodes), "table_mb": scene.response.values_.nbytes / 1e6}))
@@ -38,8 +38,35 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
                         ">= 0.4x" if is_target else "", rate / cart >= 0.4 if is_target else None))
         r = measure(lambda: env.reset(), number=200 if quick else 1000, repeats=5)
         rows.append(Row("env", f"{env_id}: reset", r.median * 1e6, "us", spread_us(r)))
+    rows += _fem_rows(quick, cart)
     rows += _vector_rows(quick)
     rows += _render_rows(quick)
+    return rows
+
+
+def _fem_rows(quick: bool, cart: float) -> list[Row]:
+    """SoftSphere-v0 on the FE tongue: its fitted response against held-out FE solves, and its step
+    against the analytic scene's (interleaved repeats in this process; target: within 2x)."""
+    t0 = time.perf_counter()
+    fem = gym.make("SoftSphere-v0", tissue={"model": "fem"})
+    build = time.perf_counter() - t0
+    scene = fem.unwrapped.world.scene
+    err = scene.response_error()
+    rows = [Row("env", "SoftSphere-v0, tissue fem: first gym.make in this process (shipped FE data; fits cached)",
+                build, "s"),
+            Row("env", f"SoftSphere-v0, tissue fem: fitted response ({scene.config['response']['model']} -> "
+                f"{type(scene.response).__name__}) vs {scene.fe.test.n_samples} held-out FE solves, surface RMS",
+                err["median_mm"], "mm (median)", f"p99 {err['p99_mm']:.3f}, max {err['max_mm']:.3f} mm")]
+    analytic = gym.make("SoftSphere-v0")
+    actions = [analytic.action_space.sample() for _ in range(4096)]
+    steps = 20_000 if quick else 100_000
+    pairs = [(gym_step_timing(analytic, actions, steps // 5).median, gym_step_timing(fem, actions, steps // 5).median)
+             for _ in range(5)]                        # interleaved: the machine's drift hits both alike
+    ratios = np.array([f / a for a, f in pairs])
+    ratio = float(np.median(ratios))
+    rows.append(Row("env", "SoftSphere-v0, tissue fem: step time / analytic scene's step time", ratio, "x",
+                    f"{1 / float(np.median([f for _, f in pairs])) / cart:.2f}x CartPole-v1; ratios "
+                    f"{ratios.min():.2f}-{ratios.max():.2f} over 5 interleaved pairs", "<= 2x", ratio <= 2.0))
     return rows
 
 

@@ -30,6 +30,8 @@ the response's ``lateral`` feature.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..geometry import SphereMesh
@@ -39,38 +41,66 @@ TABLE_INTERVALS = 4096
 _LOAD_SPAN = (1e-7, 1e5)        # loads tabulated, as multiples of the design force and of the tissue's own scale
 
 
+@dataclass(frozen=True, eq=False)
+class ContactCurve:
+    """The tissue's normal load-indentation curve at the top of the dorsum, rising from 0, and the
+    tangential compliance there: all the contact law needs from a tissue model.
+
+    Attributes:
+        loads, depths: the curve's points (N, m), strictly rising; ``(0, 0)`` is implied.
+        knee: the depth (m) past which the tissue gets stiffer without bound (the analytic tissue's
+            saturation; the FE curve's last solve): the explicit stiffness is taken no deeper.
+        lateral_compliance: drag of the loaded surface point per newton of sideways load (m/N).
+        design_depth: the depth at the device's largest pressing force (m), computed by the tissue.
+    """
+
+    loads: np.ndarray
+    depths: np.ndarray
+    knee: float
+    lateral_compliance: float
+    design_depth: float
+
+
+def analytic_curve(tissue: TissueParams, mesh: SphereMesh, design_force: float) -> ContactCurve:
+    """The analytic tissue's curve, from well below to well above both the device's force and the
+    tissue's own scale (the load indenting it by the design share of its radius), so a tissue far softer
+    or stiffer than the device still gets its rising part; saturation's flat end is cut off."""
+    analytic = AnalyticTissue(mesh, tissue)
+
+    def indentation(loads: np.ndarray) -> np.ndarray:
+        R, loads = tissue.radius, np.asarray(loads, dtype=np.float64)
+        forces = np.zeros((loads.size, 3))
+        forces[:, 2] = -loads
+        return analytic.amplitudes(np.tile([0.0, 0.0, R], (loads.size, 1)), forces)["indentation"]
+
+    own = tissue.E / effective_modulus(1.0, DESIGN_INDENTATION, tissue.nu, tissue.radius, tissue.patch_radius)
+    low, high = min(design_force, own) * _LOAD_SPAN[0], max(design_force, own) * _LOAD_SPAN[1]
+    loads = np.geomspace(low, high, 20_000)
+    depth = indentation(loads)
+    flat = np.flatnonzero(np.diff(depth) <= 0)
+    if len(flat):
+        loads, depth = loads[:flat[0] + 1], depth[:flat[0] + 1]
+    knee = tissue.linear_fraction * tissue.max_indentation * tissue.radius
+    return ContactCurve(loads, depth, knee, tissue.tangential_compliance, float(indentation(np.array([design_force]))[0]))
+
+
 class TongueContact:
-    """Normal law ``P(delta)`` (tabulated inverse of the tissue's indentation) and lateral stiffness.
+    """Normal law ``P(delta)`` (tabulated inverse of the tissue's indentation curve) and lateral stiffness.
 
     Args:
-        tissue: the scene's tissue parameters.
-        mesh: the scene's surface sampling (only to build the analytic tissue; the law does not
-            depend on it).
-        design_force: the device's largest pressing force (N): sets the reference stiffness.
+        curve: the scene's :class:`ContactCurve` (``Scene.contact_curve``).
         friction: Coulomb coefficient of the blade on the tongue (lateral sticking limit).
         wall_stiffness: least stiffness (N/m) of the law past its last node, where the saturated
             tissue is a wall: the device sets it 1,000 times its coupling stiffness, so no force the
             hand can exert pushes the blade more than a fraction of a millimetre beyond.
     """
 
-    def __init__(self, tissue: TissueParams, mesh: SphereMesh, design_force: float, friction: float,
-                 wall_stiffness: float = 0.0) -> None:
-        self.tissue = tissue
-        self.radius = tissue.radius
+    def __init__(self, curve: ContactCurve, friction: float, wall_stiffness: float = 0.0) -> None:
+        self.curve = curve
         self.friction = friction
-        self.analytic = AnalyticTissue(mesh, tissue)
-        # from well below to well above both the device's force and the tissue's (the load indenting it by the
-        # design share of its radius), so a tissue far softer or stiffer than the device still gets its rising part
-        own = tissue.E / effective_modulus(1.0, DESIGN_INDENTATION, tissue.nu, tissue.radius, tissue.patch_radius)
-        low, high = min(design_force, own) * _LOAD_SPAN[0], max(design_force, own) * _LOAD_SPAN[1]
-        loads = np.concatenate([[0.0], np.geomspace(low, high, 20_000)])
-        depth = self.indentation(loads)
-        # saturation flattens W(P) to the float resolution at huge loads: keep the strictly rising part
-        flat = np.flatnonzero(np.diff(depth) <= 0)
-        if len(flat):
-            loads, depth = loads[:flat[0] + 1], depth[:flat[0] + 1]
-        if len(loads) < 100:
-            raise ValueError(f"the tissue's indentation does not rise with the load (tissue {tissue}); cannot invert it")
+        loads, depth = np.concatenate([[0.0], curve.loads]), np.concatenate([[0.0], curve.depths])
+        if len(loads) < 3 or not (np.all(np.diff(depth) > 0) and np.all(np.diff(loads) > 0)):
+            raise ValueError("the tissue's indentation does not rise with the load; cannot invert it")
         self.step = float(depth[-1]) / TABLE_INTERVALS
         nodes = np.arange(TABLE_INTERVALS + 1) * self.step
         self.loads = np.interp(nodes, depth, loads)                     # P at each node (N)
@@ -80,18 +110,12 @@ class TongueContact:
         self.top = TABLE_INTERVALS - 1                                  # last interval index
         self.loads_list, self.slopes_list = self.loads[:-1].tolist(), self.slopes.tolist()
         # the explicit part: the stiffness at the design force, or where saturation sets in if sooner
-        knee = tissue.linear_fraction * tissue.max_indentation * tissue.radius
-        self.reference_stiffness = self.stiffness(min(self.indentation(np.array([design_force]))[0], 0.999 * knee))
-        self.lateral_stiffness = 1.0 / tissue.tangential_compliance     # k_t, N/m
+        self.reference_stiffness = self.stiffness(min(curve.design_depth, 0.999 * curve.knee))
+        self.lateral_stiffness = 1.0 / curve.lateral_compliance         # k_t, N/m
 
     def indentation(self, loads: np.ndarray) -> np.ndarray:
-        """The analytic tissue's indentation ``W`` (m) at the contact under normal loads ``P`` (N)."""
-        R = self.radius
-        loads = np.asarray(loads, dtype=np.float64)
-        contacts = np.tile([0.0, 0.0, R], (loads.size, 1))
-        forces = np.zeros((loads.size, 3))
-        forces[:, 2] = -loads
-        return self.analytic.amplitudes(contacts, forces)["indentation"]
+        """The curve's indentation (m) under normal loads ``P`` (N), interpolated linearly."""
+        return np.interp(loads, np.concatenate([[0.0], self.curve.loads]), np.concatenate([[0.0], self.curve.depths]))
 
     def load(self, depth: np.ndarray) -> np.ndarray:
         """``P(delta)`` (N) for penetrations ``delta`` (m, any shape; 0 for ``delta <= 0``)."""

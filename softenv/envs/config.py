@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from .._validation import check_choice, check_int, check_real
+from ..fem.params import FE_POISSON
+from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
 from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
 
@@ -52,6 +54,10 @@ def _choice(*options: Any):
     return lambda v, name: check_choice(v, name, options)
 
 
+def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
+    return lambda v, name: None if v is None else check(v, name)
+
+
 def _bool(v: Any, name: str) -> bool:
     if not isinstance(v, bool):
         raise ValueError(f"{name} must be True or False, got {v!r}")
@@ -85,14 +91,21 @@ def _components(v: Any, name: str) -> int | float | str:
 
 SCHEMA: dict[str, dict[str, Field]] = {
     "tissue": {
+        "model": Field("analytic", "", "analytic | fem", _choice("analytic", "fem"),
+                       "analytic (Boussinesq/Cerruti patch, tabulated) or the finite-element tongue (neo-Hookean, "
+                       "nearly incompressible; its data ship for the default scene, others are generated: fem extra)"),
         "law": Field("linear", "", "linear | stiffening", _choice("linear", "stiffening"),
-                     "linear (the paper's regime) or Fung stiffening with Hertzian contact widening"),
-        "E": Field(effective_modulus(), "Pa", "[1e-3, 1e12]", _real(1e-3, 1e12),
-                   "effective Young's modulus (default: 40 N indents 40 % of the radius; steel is 2e11)"),
-        "nu": Field(TONGUE_POISSON, "", "[0, 0.5)", _real(0, 0.5, hi_open=True), "Poisson's ratio"),
+                     "analytic model: linear (the paper's regime) or Fung stiffening with Hertzian contact widening"),
+        "E": Field(None, "Pa", "[1e-3, 1e12] | None", _optional(_real(1e-3, 1e12)),
+                   "effective Young's modulus (None: the model's default, at which 40 N indents 40 % of the radius; "
+                   "steel is 2e11)"),
+        "nu": Field(None, "", "[0, 0.5) | None", _optional(_real(0, 0.5, hi_open=True)),
+                    "Poisson's ratio (None: the model's default, 0.45 analytic, 0.49 fem: nearly incompressible)"),
         "radius": Field(TONGUE_RADIUS_M, "m", "[1e-4, 1]", _real(1e-4, 1), "sphere radius"),
         "patch_radius": Field(BLADE_PATCH_RADIUS_M, "m", "[radius / 1000, radius]", _real(1e-7, 1),
                               "blade contact-patch radius"),
+        "fe_cells": Field(8, "", "2-32", _int(2, 32),
+                          "fem model: hexahedra along the mapped cube's edge (8 reach the design force; see README)"),
     },
     "mesh": {
         "kind": Field("latlong", "", "latlong | icosphere", _choice("latlong", "icosphere"), "surface sampling"),
@@ -228,12 +241,15 @@ def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, An
                          f"[{t['radius'] / 1000:g}, {t['radius']:g}] m (tissue.radius={t['radius']:g} m)")
     # the design force's indentation over the radius (linear law): below ~1e-9 the deformations drown in the
     # rounding of the surface coordinates and the shape model has nothing to fit
-    design = 2 * (1 - t["nu"] ** 2) * dev["max_normal_force"] / (math.pi * t["patch_radius"] * t["E"] * t["radius"])
+    E, nu = material(t)
+    design = 2 * (1 - nu ** 2) * dev["max_normal_force"] / (math.pi * t["patch_radius"] * E * t["radius"])
     if design < MIN_DESIGN_INDENTATION:
-        raise ValueError(f"device.max_normal_force={dev['max_normal_force']:g} N on tissue.E={t['E']:g} Pa indents the "
+        raise ValueError(f"device.max_normal_force={dev['max_normal_force']:g} N on tissue.E={E:g} Pa indents the "
                          f"sphere (tissue.radius={t['radius']:g} m, tissue.patch_radius={t['patch_radius']:g} m) by "
                          f"{design:.2g} of its radius; at least {MIN_DESIGN_INDENTATION:g} is needed to resolve the "
                          "deformations: lower tissue.E or raise device.max_normal_force")
+    if t["model"] == "fem":
+        _check_fem(out)
     if task["target_normal_force"] == (0.0, 0.0) and task["target_sideways_force"] == (0.0, 0.0):
         raise ValueError("task.target_normal_force and task.target_sideways_force are both (0, 0): every target "
                          "would be the rest shape; give the target family a force")
@@ -250,6 +266,27 @@ def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, An
         if a < lo or b > hi:
             raise ValueError(f"task.{key}={task[key]!r} must lie within the device range [{lo:g}, {hi:g}]")
     return out
+
+
+def material(tissue: dict[str, Any]) -> tuple[float, float]:
+    """``(E, nu)`` of a tissue section, its model's defaults where they are None: nu 0.45 (analytic) or
+    0.49 (fem: nearly incompressible), E such that 40 N indents 40 % of the default radius at that nu."""
+    nu = tissue["nu"] if tissue["nu"] is not None else (FE_POISSON if tissue["model"] == "fem" else TONGUE_POISSON)
+    return (tissue["E"] if tissue["E"] is not None else effective_modulus(nu=nu)), nu
+
+
+def _check_fem(config: dict[str, dict[str, Any]]) -> None:
+    """The limits of the finite-element tongue (softenv.fem.params.FEParams) and of its data's ramps."""
+    t, n_loads = config["tissue"], config["shape_model"]["n_loads"]
+    if t["law"] != "linear":
+        raise ValueError(f"tissue.law={t['law']!r} applies to tissue.model='analytic' only; the FE tongue is "
+                         "neo-Hookean (its nonlinearity is its own): leave tissue.law at 'linear'")
+    E, nu = material(t)
+    check_real(E, "tissue.E (fem model)", 1.0, 1e9)
+    check_real(nu, "tissue.nu (fem model)", 0.0, 0.4999)
+    if n_loads % RAMP_STEPS:
+        raise ValueError(f"shape_model.n_loads={n_loads} must be a multiple of {RAMP_STEPS} with tissue.model='fem' "
+                         f"(the FE data's samples are the {RAMP_STEPS} load steps of each ramp)")
 
 
 def describe_config() -> str:

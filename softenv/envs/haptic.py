@@ -25,7 +25,7 @@ def device_parts(world: World) -> tuple[LaryngoscopeParams, TongueContact]:
     if dev["kind"] != "laryngoscope":
         raise ValueError(f"device.kind={dev['kind']!r}: the SoftSphereHaptic envs drive the laryngoscope; "
                          "use SoftSphere-v0 and its kin for the ideal device")
-    contact = TongueContact(world.scene.tissue, world.scene.mesh, dev["max_normal_force"], dev["friction"],
+    contact = TongueContact(world.scene.contact_curve(dev["max_normal_force"]), dev["friction"],
                             wall_stiffness=WALL_FACTOR * dev["coupling_stiffness"])
     return LaryngoscopeParams.from_config(world.config), contact
 

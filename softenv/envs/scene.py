@@ -4,7 +4,9 @@ Everything here is deterministic and cached twice: on disk (``softenv._cache``; 
 in a new process reads files) and in the process (every environment made from the same scene
 shares one immutable :class:`Scene`, so a batch of N environments costs no more memory than one).
 Only what the scene names is built: no regressor is trained for an exact scene, and torch is
-imported only when an MLP response has to be trained.
+imported only when an MLP response has to be trained. A ``tissue.model="fem"`` scene reads its FE
+solves (``softenv.fem.scene_data``: shipped for the default scene, else generated once and cached) in
+place of the analytic workspace sample; its exact response is their RBF interpolant, tabulated.
 """
 
 from __future__ import annotations
@@ -17,15 +19,19 @@ import numpy as np
 
 from .. import _cache
 from ..datasets import ForceShapeData, workspace_dataset
+from ..devices.contact import ContactCurve, analytic_curve
+from ..fem.params import FEParams
+from ..fem.scene_data import RAMP_STEPS, FERequest, FESceneData, scene_data
 from ..forces import DorsumLayout, Workspace
 from ..geometry import SphereMesh, make_mesh
-from ..response import ExactResponse, ResponseModel, TabulatedResponse, make_response
+from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedResponse, make_response
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
-from .config import config_key
+from .config import config_key, material
 
 _SCENES: dict[str, "Scene"] = {}
 DEVICE_BOX_KEYS = ("insertion_deg", "lateral_deg", "max_normal_force", "max_sideways_force")
+FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of an analytic scene's cache key)
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,7 +45,8 @@ class Scene:
     workspace: Workspace          # the device's force-feature box (insertion m, lateral m, normal N, sideways N)
     data: ForceShapeData
     shape_model: ShapeModel
-    response: ResponseModel       # TabulatedResponse (exact scenes) or a clipped regressor
+    response: ResponseModel       # TabulatedResponse (exact analytic scenes) or a clipped regressor
+    fe: FESceneData | None = None  # the FE solves of a tissue.model="fem" scene
 
     @property
     def n_components(self) -> int:
@@ -61,14 +68,33 @@ class Scene:
         return np.array([mid[0], mid[1], 0.0, 0.0])
 
     def exact_response(self) -> ExactResponse:
-        """The direct (untabulated) exact response of this scene: for checks and reports."""
+        """The direct (untabulated) exact response of an analytic scene: for checks and reports."""
+        if self.fe is not None:
+            raise ValueError("tissue.model='fem' has no closed-form response; its truth is the FE solves (scene.fe)")
         return ExactResponse(AnalyticTissue(self.mesh, self.tissue), self.layout, self.shape_model)
 
-    def table_error(self, n: int = 500, seed: int = 0) -> dict[str, float]:
-        """RMS surface error (mm) of the scene's response against the direct exact response, at random forces."""
-        x = np.random.default_rng(seed).uniform(self.workspace.low, self.workspace.high, (n, 4))
-        err = self.shape_model.rms_distance(self.response.predict(x), self.exact_response().predict(x)) * 1e3
+    def response_error(self, n: int = 500, seed: int = 0) -> dict[str, float]:
+        """RMS surface error (mm) of the scene's response against the truth: the direct exact response at
+        ``n`` random forces (analytic tissue), or the held-out FE solves (FE tissue; PCA truncation included)."""
+        if self.fe is not None:
+            test = self.fe.test
+            surfaces = self.shape_model.decode(self.response.predict(test.forces))
+            err = np.sqrt(np.sum((surfaces - test.shapes) ** 2, axis=1) / self.mesh.n_vertices)
+        else:
+            x = np.random.default_rng(seed).uniform(self.workspace.low, self.workspace.high, (n, 4))
+            err = self.shape_model.rms_distance(self.response.predict(x), self.exact_response().predict(x))
+        err = err * 1e3
         return {"median_mm": float(np.median(err)), "p99_mm": float(np.percentile(err, 99)), "max_mm": float(err.max())}
+
+    def contact_curve(self, design_force: float) -> ContactCurve:
+        """The tissue's normal load-indentation curve at the top of the dorsum and lateral compliance, from
+        which the laryngoscope's contact law follows (FE tissue: its solves; analytic: the closed form)."""
+        if self.fe is None:
+            return analytic_curve(self.tissue, self.mesh, design_force)
+        loads, depths = self.fe.curve_loads, self.fe.curve_depths
+        # past the last solve (the device's largest force) the tongue is a wall (TongueContact's barrier)
+        return ContactCurve(loads, depths, float(depths[-1]), self.fe.lateral_compliance,
+                            float(np.interp(design_force, np.r_[0.0, loads], np.r_[0.0, depths])))
 
 
 def degrees_to_features(commands: Any, radius: float) -> np.ndarray:
@@ -88,32 +114,49 @@ def device_workspace(config: dict) -> Workspace:
     return Workspace(tuple(low.tolist()), tuple(high.tolist()))
 
 
+def fe_request(config: dict, mesh: SphereMesh, workspace: Workspace) -> FERequest:
+    """What a tissue.model="fem" scene's FE data are computed from: the tissue section's material and
+    geometry on ``fe_cells``, the scene's mesh and device box, its workspace sampling."""
+    t, sm_cfg = config["tissue"], config["shape_model"]
+    E, nu = material(t)
+    params = FEParams(radius=t["radius"], E=E, nu=nu, patch_radius=t["patch_radius"], cells_per_side=t["fe_cells"])
+    return FERequest(params, mesh.spec(), tuple(workspace.low), tuple(workspace.high), sm_cfg["n_contacts"],
+                     sm_cfg["n_loads"] // RAMP_STEPS, sm_cfg["seed"])
+
+
 def build_scene(config: dict, progress: bool = False) -> Scene:
     """The scene for a validated config (memoised per process, files cached on disk)."""
     # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not)
+    t = config["tissue"]
     box = {"device": {k: config["device"][k] for k in DEVICE_BOX_KEYS}}
+    E, nu = material(t)
+    if t["model"] == "analytic":    # keyed as before the fem model existed: those caches stay valid
+        box["tissue"] = {**{k: v for k, v in t.items() if k not in FE_KEYS}, "E": E, "nu": nu}
     key = config_key({**config, **box}, ("tissue", "mesh", "shape_model", "response", "device"))
     if key in _SCENES:
         return _SCENES[key]
-    t = config["tissue"]
-    tissue = TissueParams(law=t["law"], E=t["E"], nu=t["nu"], radius=t["radius"], patch_radius=t["patch_radius"])
+    tissue = TissueParams(law=t["law"], E=E, nu=nu, radius=t["radius"], patch_radius=t["patch_radius"])
     mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], tissue.radius)
     layout = DorsumLayout(tissue.radius)
     workspace = device_workspace(config)
     sm_cfg = config["shape_model"]
-    data = workspace_dataset(workspace, layout, mesh, tissue, n_contacts=sm_cfg["n_contacts"], n_loads=sm_cfg["n_loads"],
-                             seed=sm_cfg["seed"])
+    fe = scene_data(fe_request(config, mesh, workspace)) if t["model"] == "fem" else None
+    data = fe.train if fe is not None else workspace_dataset(
+        workspace, layout, mesh, tissue, n_contacts=sm_cfg["n_contacts"], n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"])
     shape_model = _cache.cached("shape-model", {"data": key}, lambda: ShapeModel(sm_cfg["n_components"]).fit(data.shapes, mesh),
                                 lambda p: ShapeModel.load(p, mesh=mesh), lambda m, p: m.save(p))
     name = config["response"]["model"]
+    b = shape_model.encode(data.shapes)
     if name == "exact":
-        exact = ExactResponse(AnalyticTissue(mesh, tissue), layout, shape_model)
+        # the tissue's own response on a grid: the analytic tissue's, or (no closed form) the FE solves'
+        # interpolant (cubic RBF, softenv.response.rbf: the best of results/fem_scene.md)
+        exact = (ExactResponse(AnalyticTissue(mesh, tissue), layout, shape_model) if fe is None else
+                 RBFResponse().fit(data.forces, b, shape_model=shape_model))
         nodes = config["response"]["table_nodes"]
         response: ResponseModel = _cache.cached(
             "table", {"scene": key, "nodes": nodes}, lambda: exact.tabulate(workspace, nodes, progress=progress),
             lambda p: TabulatedResponse.load(p, shape_model=shape_model), lambda m, p: m.save(p))
     else:
-        b = shape_model.encode(data.shapes)
 
         def train() -> ResponseModel:
             # MLPs train by L-BFGS here: Levenberg-Marquardt's Jacobian on 1024 x k targets takes minutes
@@ -122,6 +165,6 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
 
         response = _cache.cached("regressor", {"scene": key, "model": name, "trainer": "lbfgs"}, train,
                                  lambda p: ResponseModel.load(p, shape_model=shape_model), lambda m, p: m.save(p))
-    scene = Scene(config, mesh, tissue, layout, workspace, data, shape_model, response)
+    scene = Scene(config, mesh, tissue, layout, workspace, data, shape_model, response, fe)
     _SCENES[key] = scene
     return scene

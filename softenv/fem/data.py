@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
@@ -26,11 +27,12 @@ from ..datasets import PAPER_CAP_ANGLE_DEG, PAPER_MAX_FORCE_N, ForceShapeData, p
 from ..forces import DorsumLayout, PaperLayout, Workspace, sample_workspace
 from ..geometry import SphereMesh, mesh_from_spec, paper_mesh
 from ..parallel import EXECUTORS, Job, run_jobs
-from ..tissue import TissueParams
-from .tongue import FEParams, FETongue, NonConvergence
+from .params import FEParams
+from .scene_data import TEST_SEED_OFFSET, FERequest, FESceneData, fe_tissue
+from .tongue import FETongue, NonConvergence
 
 RAMP_FORMAT = "softenv.FERamp"
-RAMP_VERSION = 1
+RAMP_VERSION = 2      # 2: the patch centre's displacement follows the vertices'
 
 
 @functools.lru_cache(maxsize=4)
@@ -39,18 +41,15 @@ def _tongue(params: FEParams) -> FETongue:
     return FETongue(params)
 
 
-def _tissue(params: FEParams) -> TissueParams:
-    """The data set header's tissue: the FE tongue's small-strain E, nu, radius and patch."""
-    return TissueParams(E=params.E, nu=params.nu, radius=params.radius, patch_radius=params.patch_radius)
-
-
 def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[float, float, float], steps: int,
             mesh_spec: dict, cache: bool = True) -> np.ndarray:
-    """Surface displacements ``(steps, n_vertices, 3)`` (m) at the vertices of the surface mesh
-    ``mesh_spec`` (:meth:`SphereMesh.spec`) for ``force`` (N) ramped at ``contact`` (m) in ``steps``;
-    from the cache when this ramp was solved before."""
+    """Displacements ``(steps, n_vertices + 1, 3)`` (m) for ``force`` (N) ramped at ``contact`` (m) in
+    ``steps``: at the vertices of the surface mesh ``mesh_spec`` (:meth:`SphereMesh.spec`), then at the
+    patch's centre (the contact direction on the undeformed sphere); from the cache when this ramp was
+    solved before."""
     key = {"fe": asdict(params), "contact": list(contact), "force": list(force), "steps": steps, "mesh": mesh_spec}
-    vertices = mesh_from_spec(mesh_spec).vertices
+    centre = np.asarray(contact, dtype=float) * (params.radius / np.linalg.norm(contact))
+    vertices = np.vstack([mesh_from_spec(mesh_spec).vertices, centre])
 
     def build() -> np.ndarray:
         tongue = _tongue(params)
@@ -75,7 +74,7 @@ def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[
 def solve_ramps(params: FEParams, contacts: np.ndarray, forces: np.ndarray, steps: int, mesh: SphereMesh,
                 jobs: int = 1, executor: str = "local", echo: Callable[[str], None] | None = print) -> np.ndarray:
     """:func:`fe_ramp` for each row of ``contacts`` and ``forces`` ``(R, 3)``, fanned out over ``jobs``
-    workers: ``(R, steps, n_vertices, 3)``. Raises :class:`NonConvergence` listing every ramp that
+    workers: ``(R, steps, n_vertices + 1, 3)`` (the last point: the patch's centre). Raises :class:`NonConvergence` listing every ramp that
     failed (those that finished stay cached)."""
     check_choice(executor, "executor", EXECUTORS)
     work = [Job(f"ramp {i}: {np.round(f, 3).tolist()} N at {np.round(c / params.radius, 3).tolist()}", fe_ramp,
@@ -108,10 +107,10 @@ def fe_paper_dataset(n_points: int = 441, n_deformations: int = 10, n_magnitudes
     contacts = paper_contacts(n_deformations, cap, params.radius, rng)
     down = np.tile([0.0, 0.0, -max_force], (n_deformations, 1))
     ramps = solve_ramps(params, contacts, down, n_magnitudes, mesh, jobs, executor, echo)
-    shapes = (mesh.vertices + ramps).reshape(n_deformations * n_magnitudes, -1)
+    shapes = (mesh.vertices + ramps[:, :, :-1]).reshape(n_deformations * n_magnitudes, -1)
     shapes += rng.normal(0.0, noise * params.radius, shapes.shape)
     forces, ids = paper_forces(contacts, n_magnitudes, max_force)
-    return ForceShapeData(forces, shapes, ids, mesh, _tissue(params), PaperLayout(), noise, seed,
+    return ForceShapeData(forces, shapes, ids, mesh, fe_tissue(params), PaperLayout(), noise, seed,
                           f"fem-paper-{n_points}pts-{n_deformations}def", fe=asdict(params))
 
 
@@ -123,17 +122,55 @@ def fe_workspace_dataset(workspace: Workspace, mesh: SphereMesh, params: FEParam
     ``n_contacts`` contact points x ``n_loads`` final loads, drawn as
     :func:`softenv.datasets.workspace_dataset` draws its samples; each is one ramp whose ``steps``
     load steps (the load scaled by ``1..steps / steps`` at its contact point) are the samples."""
+    steps = check_int(steps, "steps", 1, 1000)
+    ends, contacts, forces = _workspace_loads(workspace, params, n_contacts, n_loads, method, seed)
+    ramps = solve_ramps(params, contacts, forces, steps, mesh, jobs, executor, echo)
+    return _workspace_samples(ends, ramps, n_contacts, mesh, params, seed, "fem-workspace-dorsum")
+
+
+def _workspace_loads(workspace: Workspace, params: FEParams, n_contacts: int, n_loads: int, method: str,
+                     seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Final force features ``(n_contacts n_loads, 4)`` over the workspace and their contact points and forces."""
     layout = DorsumLayout(params.radius)
     if workspace.n_features != layout.n_features:
         raise ValueError(f"workspace has {workspace.n_features} columns but the dorsum layout has {layout.n_features}")
-    steps = check_int(steps, "steps", 1, 1000)
     ends, _ = sample_workspace(workspace, n_contacts, n_loads, method, seed)
-    contacts, forces = layout.to_loads(ends)
-    ramps = solve_ramps(params, contacts, forces, steps, mesh, jobs, executor, echo)
+    return (ends, *layout.to_loads(ends))
+
+
+def _workspace_samples(ends: np.ndarray, ramps: np.ndarray, n_contacts: int, mesh: SphereMesh, params: FEParams,
+                       seed: int, name: str) -> ForceShapeData:
+    """Every load step of the ramps to ``ends`` as a sample (the load scaled by ``1..steps / steps``)."""
+    steps = ramps.shape[1]
     fractions = np.arange(1, steps + 1) / steps
     features = np.repeat(ends, steps, axis=0)
     features[:, 2:] *= np.tile(fractions, len(ends))[:, None]
-    shapes = (mesh.vertices + ramps).reshape(len(ends) * steps, -1)
-    ids = np.repeat(np.arange(n_contacts), n_loads * steps)
-    return ForceShapeData(features, shapes, ids, mesh, _tissue(params), layout, 0.0, seed, "fem-workspace-dorsum",
+    shapes = (mesh.vertices + ramps[:, :, :-1]).reshape(len(ends) * steps, -1)
+    ids = np.repeat(np.arange(n_contacts), len(ends) // n_contacts * steps)
+    return ForceShapeData(features, shapes, ids, mesh, fe_tissue(params), DorsumLayout(params.radius), 0.0, seed, name,
                           fe=asdict(params))
+
+
+def fe_scene_data(request: FERequest, jobs: int = 1, executor: str = "local",
+                  echo: Callable[[str], None] | None = print) -> FESceneData:
+    """Solve an FE scene's data (:mod:`softenv.fem.scene_data`): the workspace sample and the held-out
+    solves (one fan-out over ``jobs`` workers), then the contact curve at the top of the dorsum."""
+    p, mesh, started = request.fe, mesh_from_spec(request.mesh), time.perf_counter()
+    test_seed = request.seed + TEST_SEED_OFFSET
+    train = _workspace_loads(request.workspace, p, request.n_contacts, request.n_loads, "lhs", request.seed)
+    test = _workspace_loads(request.workspace, p, request.n_test_contacts, request.n_loads, "lhs", test_seed)
+    ramps = solve_ramps(p, np.vstack([train[1], test[1]]), np.vstack([train[2], test[2]]), request.steps, mesh, jobs,
+                        executor, echo)
+    n = len(train[0])
+    # the contact curve: the largest press at the top, and a sideways load under half that press
+    top, press, sideways = np.array([0.0, 0.0, p.radius]), request.high[2], request.high[3]
+    curves = solve_ramps(p, np.vstack([top, top]), np.array([[0.0, 0.0, -press], [0.0, sideways, -press / 2]]),
+                         request.curve_steps, mesh, jobs, executor, echo)[:, :, -1]     # at the patch's centre
+    fractions = np.arange(1, request.curve_steps + 1) / request.curve_steps
+    drag, sideways_loads = curves[1, :, 1], fractions * sideways
+    return FESceneData(request,
+                       _workspace_samples(train[0], ramps[:n], request.n_contacts, mesh, p, request.seed, "fem-scene-train"),
+                       _workspace_samples(test[0], ramps[n:], request.n_test_contacts, mesh, p, test_seed, "fem-scene-test"),
+                       fractions * press, -curves[0, :, 2],
+                       float(drag @ sideways_loads / (sideways_loads @ sideways_loads)),    # least-squares slope
+                       {"seconds": round(time.perf_counter() - started, 1), "jobs": jobs, "executor": executor})

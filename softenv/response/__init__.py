@@ -11,9 +11,11 @@ from .base import MinMaxScaler, ResponseModel
 from .exact import ExactResponse, TabulatedResponse
 from .mlp import MLPResponse
 from .polynomial import PolynomialResponse
+from .rbf import RBFResponse
 
 MODELS: dict[str, type[ResponseModel]] = {
-    cls.kind: cls for cls in (PolynomialResponse, AnfisResponse, MLPResponse, ExactResponse, TabulatedResponse)
+    cls.kind: cls for cls in (PolynomialResponse, AnfisResponse, MLPResponse, ExactResponse, TabulatedResponse,
+                              RBFResponse)
 }
 
 load_response = ResponseModel.load
@@ -50,4 +52,4 @@ def make_response(name: str, seed: int = 0, clip: bool = False, **mlp_options: A
 
 
 __all__ = ["AnfisResponse", "ExactResponse", "MLPResponse", "MODELS", "MinMaxScaler", "PolynomialResponse",
-           "REGRESSORS", "ResponseModel", "TabulatedResponse", "load_response", "make_response"]
+           "RBFResponse", "REGRESSORS", "ResponseModel", "TabulatedResponse", "load_response", "make_response"]

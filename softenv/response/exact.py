@@ -14,9 +14,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .._progress import Progress
 from .._validation import check_array
-from ..forces import ForceLayout, Workspace, layout_from_dict
+from ..forces import ForceLayout, layout_from_dict
 from ..geometry import mesh_from_spec
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
@@ -52,23 +51,6 @@ class ExactResponse(ResponseModel):
 
     def _predict_scaled(self, x: np.ndarray) -> np.ndarray:
         return self.shape_model.encode(self.tissue.surfaces(*self.layout.to_loads(x)))
-
-    def tabulate(self, workspace: Workspace, nodes: Sequence[int], progress: bool = False) -> "TabulatedResponse":
-        """Sample this response on a grid of ``nodes[i]`` points along each workspace axis."""
-        nodes = tuple(int(n) for n in nodes)
-        if len(nodes) != workspace.n_features or min(nodes) < 2:
-            raise ValueError(f"nodes={nodes} needs {workspace.n_features} counts of at least 2")
-        axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(workspace.low, workspace.high, nodes)]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(nodes))
-        values = np.empty((grid.shape[0], self.n_outputs_))
-        chunk = 2048
-        with Progress(-(-grid.shape[0] // chunk), "tabulating the exact response", enabled=progress) as bar:
-            for start in range(0, grid.shape[0], chunk):
-                values[start:start + chunk] = self._predict_scaled(grid[start:start + chunk])
-                bar.advance()
-        table = TabulatedResponse(workspace.low, workspace.high, values.reshape(*nodes, -1))
-        table.shape_model_fingerprint_ = self.shape_model_fingerprint_
-        return table
 
     def _params(self) -> dict[str, Any]:
         return {"clip": self.clip}
