@@ -2,7 +2,7 @@
 
     python scripts/fem_validation.py --out results
 
-Writes results/fem.md (and fem_indentation.png):
+Writes results/fem.md (and fem_indentation.png, fem_error_vs_runtime.png):
 1. the homogeneous stretch of a cube against the closed form, and Hooke's law at small strain;
 2. equilibrium: the base's force against the blade's, for an oblique press;
 3. mesh convergence: the indentation at half the design force (20 N; 16 cells a side do not reach
@@ -15,7 +15,7 @@ Writes results/fem.md (and fem_indentation.png):
    noise floor keep per number of deformations, at 441 and 961 points, beside the analytic data;
 6. the paper's regressors on those FE data beside the analytic data: surface error against the
    haptic update's run time, random rows and held-out contacts (scripts/evaluate_regressors.py's
-   evaluation, ``--seeds`` seeds).
+   evaluation, ``--seeds`` seeds), at 441 and 961 points.
 """
 
 from __future__ import annotations
@@ -156,7 +156,7 @@ def main() -> None:
             lines.append(f"| {n_points} | {D} | {k[0][0]} / {k[0][1]} | {k[1][0]} / {k[1][1]} | "
                          f"{f'{seconds:.0f}' if D == 1 else ''} |")
     lines.append("")
-    lines += regressor_section(args.seeds, args.jobs)
+    lines += regressor_section(args.seeds, args.jobs, Path(args.out))
     _plot(Path(args.out) / "fem_indentation.png", fe_forces, fe_depth, curves)
     command = "python " + " ".join(sys.argv)
     lines += [f"Made by `{command}` in {time.perf_counter() - started:.0f} s "
@@ -166,38 +166,73 @@ def main() -> None:
     print("\n".join(lines))
 
 
-def regressor_section(seeds: int, jobs: int) -> list[str]:
-    """Section 6: the paper's regressors on FE and analytic paper data (441 points), same evaluation."""
+def regressor_section(seeds: int, jobs: int, out: Path) -> list[str]:
+    """Section 6: the paper's regressors on FE and analytic paper data (441 and 961 points), the same
+    evaluation for both, and their error against the haptic update time (``fem_error_vs_runtime.png``)."""
     from evaluate_regressors import evaluate_one        # this script's neighbour: one evaluation for both
 
     models = ["poly1", "poly2", "poly3", "anfis", "mlp"]
     rows = []
-    for seed in range(seeds):
-        sources = {"FE": fe_paper_dataset(441, 10, 11, params=FEParams(cells_per_side=8), seed=seed, jobs=jobs,
-                                          echo=None),
-                   "analytic": paper_dataset(441, 10, 11, seed=seed)}
-        for source, data in sources.items():
-            for split_name in ("rows", "contacts"):
-                split = (split_rows(data.n_samples, seed=seed) if split_name == "rows"
-                         else split_by_contact(data.contact_ids, seed=seed))
-                shape_model = ShapeModel("scree", noise_std=data.noise_std).fit(data.shapes[split.train], data.mesh)
-                for name in models:
-                    row, _ = evaluate_one(name, data, split, shape_model, seed, quick=True)
-                    rows.append(dict(row, source=source, split=split_name))
+    for n_points in (441, 961):
+        for seed in range(seeds):
+            sources = {"FE": fe_paper_dataset(n_points, 10, 11, params=FEParams(cells_per_side=8), seed=seed, jobs=jobs,
+                                              echo=None),
+                       "analytic": paper_dataset(n_points, 10, 11, seed=seed)}
+            for source, data in sources.items():
+                for split_name in ("rows", "contacts"):
+                    split = (split_rows(data.n_samples, seed=seed) if split_name == "rows"
+                             else split_by_contact(data.contact_ids, seed=seed))
+                    shape_model = ShapeModel("scree", noise_std=data.noise_std).fit(data.shapes[split.train], data.mesh)
+                    for name in models:
+                        row, _ = evaluate_one(name, data, split, shape_model, seed, quick=True)
+                        rows.append(dict(row, source=source, split=split_name, points=n_points))
+
+    def mean(name: str, points: int, source: str, split: str, key: str = "rmse_mm") -> float:
+        return float(np.mean([r[key] for r in rows if r["model"] == name and r["points"] == points
+                              and r["source"] == source and r["split"] == split]))
+
     lines = ["## 6. The paper's regressors on FE data", "",
-             f"441 points, 10 deformations x 11 magnitudes, {seeds} data seeds (mean over seeds); the shape model "
-             "(scree) and the regressors are fitted on the training rows; surface RMSE of the decoded prediction "
-             "on the test rows (mm) and the haptic update (predict + decode, us).", "",
-             "| model | FE, random rows | analytic, random rows | FE, held-out contacts | analytic, held-out contacts "
-             "| haptic update on FE (us) |", "|---|---|---|---|---|---|"]
-    for name in models:
-        def mean(source: str, split: str, key: str = "rmse_mm") -> float:
-            return float(np.mean([r[key] for r in rows if r["model"] == name and r["source"] == source
-                                  and r["split"] == split]))
-        lines.append(f"| {name} | {mean('FE', 'rows'):.3f} | {mean('analytic', 'rows'):.3f} | "
-                     f"{mean('FE', 'contacts'):.3f} | {mean('analytic', 'contacts'):.3f} | "
-                     f"{mean('FE', 'rows', 'haptic_us'):.0f} |")
-    return lines + [""]
+             f"10 deformations x 11 magnitudes, {seeds} data seeds (mean over seeds); the shape model (scree) and the "
+             "regressors are fitted on the training rows; surface RMSE of the decoded prediction on the test rows "
+             "(mm) and the haptic update (predict + decode, us). Error against update time: "
+             "`fem_error_vs_runtime.png`.", ""]
+    for points in (441, 961):
+        lines += [f"{points} points:", "",
+                  "| model | FE, random rows | analytic, random rows | FE, held-out contacts | analytic, held-out "
+                  "contacts | haptic update on FE (us) |", "|---|---|---|---|---|---|"]
+        for name in models:
+            lines.append(f"| {name} | {mean(name, points, 'FE', 'rows'):.3f} | {mean(name, points, 'analytic', 'rows'):.3f} "
+                         f"| {mean(name, points, 'FE', 'contacts'):.3f} | {mean(name, points, 'analytic', 'contacts'):.3f} "
+                         f"| {mean(name, points, 'FE', 'rows', 'haptic_us'):.0f} |")
+        lines.append("")
+    _plot_error_vs_runtime(out / "fem_error_vs_runtime.png", models, mean)
+    return lines
+
+
+def _plot_error_vs_runtime(path: Path, models: list[str], mean) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    for ax, split in zip(axes, ("rows", "contacts")):
+        for source, colour in (("FE", "tab:red"), ("analytic", "tab:blue")):
+            for points, marker in ((441, "o"), (961, "s")):
+                x = [mean(m, points, source, split, "haptic_us") for m in models]
+                y = [mean(m, points, source, split) for m in models]
+                ax.scatter(x, y, c=colour, marker=marker, label=f"{source}, {points} points")
+                if source == "FE" and points == 441:
+                    for m, xi, yi in zip(models, x, y):
+                        ax.annotate(m, (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("haptic update: predict + decode (us)")
+        ax.set_title("random rows" if split == "rows" else "held-out contact points", fontsize=9)
+    axes[0].set_ylabel("surface RMSE (mm)")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def _plot(path: Path, forces: np.ndarray, fe_depth: np.ndarray, curves: dict[str, list[float]]) -> None:

@@ -193,3 +193,31 @@ def test_a_failing_load_step_is_cut_back_and_reaches_the_same_equilibrium():
     ramp = FETongue(FEParams(cells_per_side=4, cutbacks=0)).solve(contact, force, steps=4)
     assert len(one_step.fractions) == 1                                   # intermediate loads are not samples
     assert np.abs(one_step.displacements[-1] - ramp.displacements[-1]).max() < 1e-9 * 0.03   # hyperelastic: same state
+
+
+def test_an_fe_scenes_data_regenerate_bit_for_bit_and_its_curve_is_the_patch_centres_indentation(tmp_path, monkeypatch):
+    from softenv.fem.data import fe_scene_data
+    from softenv.fem.scene_data import FERequest, FESceneData
+    from softenv.geometry import make_mesh
+
+    params = FEParams(cells_per_side=2)
+    request = FERequest(params, make_mesh("latlong", 5, params.radius).spec(), (0.02, -0.008, 0.0, -5.0),
+                        (0.05, 0.008, 20.0, 5.0), n_contacts=2, n_loads=1, seed=0, steps=2, n_test_contacts=1,
+                        curve_steps=3)
+    runs = []
+    for name, jobs in (("a", 1), ("b", 2)):                      # from nothing each time, 1 and 2 workers
+        monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path / name))
+        fe_scene_data(request, jobs=jobs, echo=None).save(tmp_path / f"{name}.npz")
+        runs.append(np.load(tmp_path / f"{name}.npz"))
+    for key in runs[0].files:
+        if key != "__meta__":
+            assert np.array_equal(runs[0][key], runs[1][key]), key
+    data = FESceneData.load(tmp_path / "a.npz", request)
+    assert data.train.n_samples == 4 and data.test.n_samples == 2
+    # the contact curve: the solver's own displacement of the patch's centre under the press at the top
+    tongue = FETongue(params)
+    top = np.array([0.0, 0.0, params.radius])
+    solution = tongue.solve(top, np.array([0.0, 0.0, -20.0]), 3)
+    depth = -tongue.displacements_at(solution.displacements, top[None])[:, 0, 2]
+    np.testing.assert_allclose(data.curve_depths, depth, rtol=1e-12)
+    np.testing.assert_allclose(data.curve_loads, [20 / 3, 40 / 3, 20.0])
