@@ -122,6 +122,7 @@ def test_the_fe_scenes_response_reproduces_held_out_fe_solves_better_than_the_pa
     assert err["median_mm"] < 0.5 * poly3["median_mm"]
     with pytest.raises(ValueError, match="no closed-form response"):
         scene.exact_response()
+    assert gym.make("SoftSphereHaptic-v0", **FEM).unwrapped.world.scene is scene     # one scene per process
 
 
 def test_the_rbf_interpolates_its_samples_and_reproduces_a_linear_field_exactly(tmp_path):

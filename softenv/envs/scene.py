@@ -11,6 +11,7 @@ place of the analytic workspace sample; its exact response is their RBF interpol
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -143,6 +144,9 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
     fe = scene_data(fe_request(config, mesh, workspace)) if t["model"] == "fem" else None
     data = fe.train if fe is not None else workspace_dataset(
         workspace, layout, mesh, tissue, n_contacts=sm_cfg["n_contacts"], n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"])
+    memo = key
+    if fe is not None:      # fits cached from FE data are keyed by those data's bits, not only by their request
+        key += hashlib.sha256(data.forces.tobytes() + data.shapes.tobytes()).hexdigest()
     shape_model = _cache.cached("shape-model", {"data": key}, lambda: ShapeModel(sm_cfg["n_components"]).fit(data.shapes, mesh),
                                 lambda p: ShapeModel.load(p, mesh=mesh), lambda m, p: m.save(p))
     name = config["response"]["model"]
@@ -166,5 +170,5 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
         response = _cache.cached("regressor", {"scene": key, "model": name, "trainer": "lbfgs"}, train,
                                  lambda p: ResponseModel.load(p, shape_model=shape_model), lambda m, p: m.save(p))
     scene = Scene(config, mesh, tissue, layout, workspace, data, shape_model, response, fe)
-    _SCENES[key] = scene
+    _SCENES[memo] = scene
     return scene
