@@ -74,8 +74,8 @@ def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[
 def solve_ramps(params: FEParams, contacts: np.ndarray, forces: np.ndarray, steps: int, mesh: SphereMesh,
                 jobs: int = 1, executor: str = "local", echo: Callable[[str], None] | None = print) -> np.ndarray:
     """:func:`fe_ramp` for each row of ``contacts`` and ``forces`` ``(R, 3)``, fanned out over ``jobs``
-    workers: ``(R, steps, n_vertices + 1, 3)`` (the last point: the patch's centre). Raises :class:`NonConvergence` listing every ramp that
-    failed (those that finished stay cached)."""
+    workers: ``(R, steps, n_vertices + 1, 3)`` (the last point: the patch's centre). Raises
+    :class:`NonConvergence` listing every ramp that failed (those that finished stay cached)."""
     check_choice(executor, "executor", EXECUTORS)
     work = [Job(f"ramp {i}: {np.round(f, 3).tolist()} N at {np.round(c / params.radius, 3).tolist()}", fe_ramp,
                 (params, tuple(map(float, c)), tuple(map(float, f)), steps, mesh.spec()))
