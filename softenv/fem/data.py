@@ -47,7 +47,8 @@ def fe_ramp(params: FEParams, contact: tuple[float, float, float], force: tuple[
     ``steps``: at the vertices of the surface mesh ``mesh_spec`` (:meth:`SphereMesh.spec`), then at the
     patch's centre (the contact direction on the undeformed sphere); from the cache when this ramp was
     solved before."""
-    key = {"fe": asdict(params), "contact": list(contact), "force": list(force), "steps": steps, "mesh": mesh_spec}
+    key = {"fe": asdict(params), "contact": list(contact), "force": list(force), "steps": steps, "mesh": mesh_spec,
+           "format": RAMP_VERSION}       # entries of an older format are never even looked at
     centre = np.asarray(contact, dtype=float) * (params.radius / np.linalg.norm(contact))
     vertices = np.vstack([mesh_from_spec(mesh_spec).vertices, centre])
 

@@ -193,5 +193,5 @@ def scene_data(request: FERequest) -> FESceneData:
               "for the default size); cached afterwards", file=sys.stderr)
         return fe_scene_data(request, jobs=usable_cores(), echo=lambda line: print(line, file=sys.stderr))
 
-    return _cache.cached("fem-scene", request.to_dict(), generate, lambda p: FESceneData.load(p, request),
-                         lambda data, p: data.save(p))
+    return _cache.cached("fem-scene", {**request.to_dict(), "format": SCENE_DATA_VERSION}, generate,
+                         lambda p: FESceneData.load(p, request), lambda data, p: data.save(p))
