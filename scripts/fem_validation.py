@@ -210,27 +210,33 @@ def regressor_section(seeds: int, jobs: int, out: Path) -> list[str]:
 
 
 def _plot_error_vs_runtime(path: Path, models: list[str], mean) -> None:
+    """One marker shape per model, one colour per data source; filled: 441 points, hollow: 961."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    markers = dict(zip(models, "osD^v"))
+    colours = {"FE": "tab:red", "analytic": "tab:blue"}
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.8), sharey=True)
     for ax, split in zip(axes, ("rows", "contacts")):
-        for source, colour in (("FE", "tab:red"), ("analytic", "tab:blue")):
-            for points, marker in ((441, "o"), (961, "s")):
-                x = [mean(m, points, source, split, "haptic_us") for m in models]
-                y = [mean(m, points, source, split) for m in models]
-                ax.scatter(x, y, c=colour, marker=marker, label=f"{source}, {points} points")
-                if source == "FE" and points == 441:
-                    for m, xi, yi in zip(models, x, y):
-                        ax.annotate(m, (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        for source, colour in colours.items():
+            for points in (441, 961):
+                for m in models:
+                    ax.scatter(mean(m, points, source, split, "haptic_us"), mean(m, points, source, split),
+                               marker=markers[m], s=36, edgecolors=colour,
+                               facecolors=colour if points == 441 else "none")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("haptic update: predict + decode (us)")
         ax.set_title("random rows" if split == "rows" else "held-out contact points", fontsize=9)
     axes[0].set_ylabel("surface RMSE (mm)")
-    axes[1].legend(fontsize=7)
-    fig.tight_layout()
+    handles = [Line2D([], [], ls="", marker=markers[m], color="k", label=m) for m in models]
+    handles += [Line2D([], [], ls="", marker="o", color=c, label=f"{s} data") for s, c in colours.items()]
+    handles += [Line2D([], [], ls="", marker="o", color="k", label="441 points"),
+                Line2D([], [], ls="", marker="o", markerfacecolor="none", color="k", label="961 points")]
+    fig.legend(handles=handles, loc="center right", fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0, 0.84, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
