@@ -150,22 +150,24 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
     shape_model = _cache.cached("shape-model", {"data": key}, lambda: ShapeModel(sm_cfg["n_components"]).fit(data.shapes, mesh),
                                 lambda p: ShapeModel.load(p, mesh=mesh), lambda m, p: m.save(p))
     name = config["response"]["model"]
-    b = shape_model.encode(data.shapes)
     if name == "exact":
-        # the tissue's own response on a grid: the analytic tissue's, or (no closed form) the FE solves'
-        # interpolant (cubic RBF, softenv.response.rbf: the best of results/fem_scene.md)
-        exact = (ExactResponse(AnalyticTissue(mesh, tissue), layout, shape_model) if fe is None else
-                 RBFResponse().fit(data.forces, b, shape_model=shape_model))
-        nodes = config["response"]["table_nodes"]
-        response: ResponseModel = _cache.cached(
-            "table", {"scene": key, "nodes": nodes}, lambda: exact.tabulate(workspace, nodes, progress=progress),
-            lambda p: TabulatedResponse.load(p, shape_model=shape_model), lambda m, p: m.save(p))
-    else:
+        def tabulate() -> ResponseModel:
+            # the tissue's own response on a grid: the analytic tissue's, or (no closed form) the FE solves'
+            # interpolant (cubic RBF, softenv.response.rbf: the best of results/fem_scene.md)
+            exact = (ExactResponse(AnalyticTissue(mesh, tissue), layout, shape_model) if fe is None else
+                     RBFResponse().fit(data.forces, shape_model.encode(data.shapes), shape_model=shape_model))
+            return exact.tabulate(workspace, nodes, progress=progress)
 
+        nodes = config["response"]["table_nodes"]
+        response: ResponseModel = _cache.cached("table", {"scene": key, "nodes": nodes}, tabulate,
+                                                lambda p: TabulatedResponse.load(p, shape_model=shape_model),
+                                                lambda m, p: m.save(p))
+    else:
         def train() -> ResponseModel:
             # MLPs train by L-BFGS here: Levenberg-Marquardt's Jacobian on 1024 x k targets takes minutes
             options = {"trainer": "lbfgs"} if name.startswith("mlp") else {}
-            return make_response(name, seed=sm_cfg["seed"], clip=True, **options).fit(data.forces, b, shape_model=shape_model)
+            return make_response(name, seed=sm_cfg["seed"], clip=True, **options).fit(
+                data.forces, shape_model.encode(data.shapes), shape_model=shape_model)
 
         response = _cache.cached("regressor", {"scene": key, "model": name, "trainer": "lbfgs"}, train,
                                  lambda p: ResponseModel.load(p, shape_model=shape_model), lambda m, p: m.save(p))
