@@ -24,7 +24,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import softenv  # noqa: E402,F401  (registers the ids)
-from softenv.bench.timing import gym_step_timing  # noqa: E402
+from softenv.bench.timing import paired_step_ratios  # noqa: E402
 from softenv.response import REGRESSORS  # noqa: E402
 
 FEM = {"tissue": {"model": "fem"}}
@@ -44,8 +44,7 @@ def main() -> None:
         env = gym.make("SoftSphere-v0", **FEM, response={"model": name})
         build = time.perf_counter() - t0
         err = env.unwrapped.world.scene.response_error()
-        ratios = [gym_step_timing(env, actions, args.steps).median / gym_step_timing(analytic, actions, args.steps).median
-                  for _ in range(5)]
+        ratios = paired_step_ratios(env, analytic, actions, args.steps)
         lines.append(f"| {name} | {err['median_mm']:.4f} | {err['p99_mm']:.4f} | {err['max_mm']:.4f} | {build:.1f} | "
                      f"{np.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f}) |")
         print(lines[-1], flush=True)

@@ -163,3 +163,10 @@ def cartpole_steps_per_second(steps: int = 100_000, seed: int = 0) -> Timing:
     timing = gym_step_timing(env, actions, steps, seed=seed)
     env.close()
     return timing
+
+
+def paired_step_ratios(env: Any, reference: Any, actions: list, steps: int, pairs: int = 5) -> np.ndarray:
+    """``env``'s step time over ``reference``'s, from ``pairs`` interleaved :func:`gym_step_timing` runs
+    of ``steps`` steps each (the machine's drift hits both alike)."""
+    return np.array([gym_step_timing(env, actions, steps).median / gym_step_timing(reference, actions, steps).median
+                     for _ in range(pairs)])
