@@ -189,7 +189,7 @@ def scene_data(request: FERequest) -> FESceneData:
                               f"pip install 'softenv[fem]' ({exc})") from exc
         from ..parallel import usable_cores
 
-        print(f"softenv: generating the FE data of this scene on {usable_cores()} cores (about 4 min on 2 cores "
+        print(f"softenv: generating the FE data of this scene on {usable_cores()} cores (about 3 min on 2 cores "
               "for the default size); cached afterwards", file=sys.stderr)
         return fe_scene_data(request, jobs=usable_cores(), echo=lambda line: print(line, file=sys.stderr))
 
