@@ -41,7 +41,7 @@ SCENE_DATA_FORMAT = "softenv.FESceneData"
 SCENE_DATA_VERSION = 1
 RAMP_STEPS = 4          # load steps per ramp: a scene's n_loads samples per contact are n_loads / 4 ramps
 TEST_CONTACTS = 16      # held-out contact points (x the scene's final loads per contact)
-TEST_SEED_OFFSET = 1000 # held-out solves draw their contacts and loads from the scene's seed + this
+TEST_SEED_OFFSET = 1000  # held-out solves draw their contacts and loads from the scene's seed + this
 CURVE_STEPS = 20        # load steps of the contact curve at the top of the dorsum
 SHIPPED_DIR = Path(__file__).with_name("shipped")
 
@@ -72,7 +72,6 @@ class FERequest:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FERequest":
-        d = dict(d)
         return cls(**{**d, "fe": FEParams(**d["fe"]), "low": tuple(d["low"]), "high": tuple(d["high"])})
 
     def difference(self, other: "FERequest") -> str | None:
@@ -108,13 +107,13 @@ class FESceneData:
     test: ForceShapeData
     curve_loads: np.ndarray      # (CURVE_STEPS,) N, normal load at the top of the dorsum
     curve_depths: np.ndarray     # (CURVE_STEPS,) m, indentation at the patch's centre under it
-    lateral_compliance: float    # m/N, drag of the patch's centre per newton of sideways load (small load)
-    generation: dict             # how the file was made: seconds, jobs, executor, command
+    lateral_compliance: float    # m/N, drag of the patch's centre per newton of sideways load (under half the press)
+    generation: dict             # how the file was made: seconds, jobs, executor
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the versioned ``.npz`` (atomic); the arrays are the same bits on every regeneration."""
-        arrays = {f"{part}_{name}": getattr(data, attr) for part, data in (("train", self.train), ("test", self.test))
-                  for name, attr in (("forces", "forces"), ("shapes", "shapes"), ("contact_ids", "contact_ids"))}
+        arrays = {f"{part}_{name}": getattr(data, name) for part, data in (("train", self.train), ("test", self.test))
+                  for name in ("forces", "shapes", "contact_ids")}
         arrays.update(curve_loads=self.curve_loads, curve_depths=self.curve_depths,
                       lateral_compliance=np.array(self.lateral_compliance))
         save_artifact(path, SCENE_DATA_FORMAT, SCENE_DATA_VERSION, arrays,
