@@ -46,13 +46,11 @@ def main() -> None:
 
     from softenv.envs import ENV_SCENES, HAPTIC_SCENES
     from softenv.envs.config import scene_config
-    from softenv.envs.scene import device_workspace, fe_request
+    from softenv.envs.scene import fe_request
     from softenv.fem.data import fe_scene_data
-    from softenv.geometry import make_mesh
 
     config = scene_config({**ENV_SCENES, **HAPTIC_SCENES}[args.env_id], {"tissue": {"model": "fem"}})
-    mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], config["tissue"]["radius"])
-    request = fe_request(config, mesh, device_workspace(config))
+    request = fe_request(config)
     started = time.perf_counter()
     data = fe_scene_data(request, jobs=args.jobs, executor=args.executor)
     seconds = time.perf_counter() - started
@@ -65,7 +63,7 @@ def main() -> None:
             f"{fe.radius * 1e3:g} mm, patch {fe.patch_radius * 1e3:g} mm, base cap {fe.cap_deg:g} deg.\n\n"
             f"- workspace sample: {request.n_contacts} contact points x {request.n_loads} loads = "
             f"{request.n_contacts * request.n_loads} ramps of {request.steps} load steps: {data.train.n_samples} samples "
-            f"on {mesh.n_vertices} vertices\n"
+            f"on {data.train.mesh.n_vertices} vertices\n"
             f"- held-out solves: {request.n_test_contacts} other contact points x {request.n_loads} loads = "
             f"{data.test.n_samples} samples\n"
             f"- contact curve: {request.curve_steps} load steps to {request.high[2]:g} N at the top: indentation "

@@ -60,8 +60,10 @@ def _umask() -> int:
     return mask
 
 
-def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Read an artifact written by :func:`save_artifact`, checking its kind and format version."""
+def load_artifact(path: str | os.PathLike, kind: str, version: int, *,
+                  header_only: bool = False) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read an artifact written by :func:`save_artifact`, checking its kind and format version.
+    ``header_only``: check and return the header, read no array (the arrays come back empty)."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"path {str(path)!r} does not exist or is not a file")
@@ -70,7 +72,8 @@ def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dic
             if _META_KEY not in data.files:
                 raise ValueError(f"{str(path)!r} is not a softenv artifact (no {_META_KEY!r} entry)")
             meta = json.loads(str(data[_META_KEY][()]))
-            arrays = {name: data[name] for name in data.files if name not in (_META_KEY, STAMP_MEMBER)}
+            arrays = {} if header_only else {name: data[name] for name in data.files
+                                             if name not in (_META_KEY, STAMP_MEMBER)}
     except (zipfile.BadZipFile, OSError, EOFError, json.JSONDecodeError, KeyError) as exc:
         raise ValueError(f"{str(path)!r} is corrupt or not an .npz artifact: {exc}") from exc
     except ValueError as exc:
@@ -93,20 +96,6 @@ def load_artifact(path: str | os.PathLike, kind: str, version: int) -> tuple[dic
         raise ValueError(f"{str(path)!r} has format_version={found_version!r}; this softenv reads "
                          f"{kind!r} format_version={version} only (re-create the file)")
     return arrays, meta
-
-
-def artifact_header(path: str | os.PathLike, kind: str, version: int) -> dict[str, Any]:
-    """The header of an artifact without reading its arrays, checked as :func:`load_artifact` checks it."""
-    path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data[_META_KEY][()]))
-    except (zipfile.BadZipFile, OSError, EOFError, json.JSONDecodeError, KeyError, ValueError) as exc:
-        raise ValueError(f"{str(path)!r} is corrupt or not a softenv artifact: {exc}") from exc
-    if not isinstance(meta, dict) or meta.get("kind") != kind or meta.get("format_version") != version:
-        found = (meta.get("kind"), meta.get("format_version")) if isinstance(meta, dict) else meta
-        raise ValueError(f"{str(path)!r} holds {found!r}; expected a {kind!r} artifact of format_version={version}")
-    return meta
 
 
 def require_arrays(arrays: dict[str, np.ndarray], names: list[str], path: str | os.PathLike) -> None:

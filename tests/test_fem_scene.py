@@ -13,18 +13,15 @@ import pytest
 import softenv  # noqa: F401  (registers the ids)
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES
 from softenv.envs.config import make_config, scene_config
-from softenv.envs.scene import device_workspace, fe_request
+from softenv.envs.scene import fe_request
 from softenv.fem.params import FEParams
 from softenv.fem.scene_data import FERequest, FESceneData, scene_data, shipped_file
-from softenv.geometry import make_mesh
 
 FEM = {"tissue": {"model": "fem"}}
 
 
 def default_request(**sections) -> FERequest:
-    config = make_config(**{**sections, "tissue": {**FEM["tissue"], **sections.get("tissue", {})}})
-    mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], config["tissue"]["radius"])
-    return fe_request(config, mesh, device_workspace(config))
+    return fe_request(make_config(**{**sections, "tissue": {**FEM["tissue"], **sections.get("tissue", {})}}))
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +33,7 @@ def shipped() -> FESceneData:
 
 def test_every_default_scene_id_finds_the_shipped_fe_data():
     for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items():
-        config = scene_config(scene, FEM)
-        mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], config["tissue"]["radius"])
-        assert shipped_file(fe_request(config, mesh, device_workspace(config))) is not None, env_id
+        assert shipped_file(fe_request(scene_config(scene, FEM))) is not None, env_id
 
 
 def test_shipped_data_hold_the_workspace_the_held_out_solves_and_a_rising_contact_curve(shipped):

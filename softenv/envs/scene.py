@@ -115,12 +115,14 @@ def device_workspace(config: dict) -> Workspace:
     return Workspace(tuple(low.tolist()), tuple(high.tolist()))
 
 
-def fe_request(config: dict, mesh: SphereMesh, workspace: Workspace) -> FERequest:
+def fe_request(config: dict) -> FERequest:
     """What a tissue.model="fem" scene's FE data are computed from: the tissue section's material and
-    geometry on ``fe_cells``, the scene's mesh and device box, its workspace sampling."""
+    geometry on ``fe_cells``, the scene's surface mesh and device box, its workspace sampling."""
     t, sm_cfg = config["tissue"], config["shape_model"]
     E, nu = material(t)
     params = FEParams(radius=t["radius"], E=E, nu=nu, patch_radius=t["patch_radius"], cells_per_side=t["fe_cells"])
+    mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], t["radius"])
+    workspace = device_workspace(config)
     return FERequest(params, mesh.spec(), tuple(workspace.low), tuple(workspace.high), sm_cfg["n_contacts"],
                      sm_cfg["n_loads"] // RAMP_STEPS, sm_cfg["seed"])
 
@@ -141,7 +143,7 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
     layout = DorsumLayout(tissue.radius)
     workspace = device_workspace(config)
     sm_cfg = config["shape_model"]
-    fe = scene_data(fe_request(config, mesh, workspace)) if t["model"] == "fem" else None
+    fe = scene_data(fe_request(config)) if t["model"] == "fem" else None
     data = fe.train if fe is not None else workspace_dataset(
         workspace, layout, mesh, tissue, n_contacts=sm_cfg["n_contacts"], n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"])
     memo = key

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from .. import _cache
-from .._artifact import artifact_header, load_artifact, require_arrays, save_artifact
+from .._artifact import load_artifact, require_arrays, save_artifact
 from ..datasets import ForceShapeData
 from ..forces import DorsumLayout, Workspace
 from ..geometry import SphereMesh, mesh_from_spec
@@ -163,7 +163,7 @@ def _dataset(arrays: dict[str, np.ndarray], part: str, request: FERequest, mesh:
 def shipped_file(request: FERequest) -> Path | None:
     """The file shipped with softenv for ``request``, if there is one (found by its header)."""
     for path in sorted(SHIPPED_DIR.glob("*.npz")):
-        meta = artifact_header(path, SCENE_DATA_FORMAT, SCENE_DATA_VERSION)
+        _, meta = load_artifact(path, SCENE_DATA_FORMAT, SCENE_DATA_VERSION, header_only=True)
         if FERequest.from_dict(meta["request"]) == request:
             return path
     return None
