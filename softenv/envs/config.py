@@ -303,7 +303,17 @@ def _keys_help(section: str) -> str:
     return ", ".join(f"{k} ({f.unit + ', ' if f.unit else ''}{f.allowed})" for k, f in SCHEMA[section].items())
 
 
+FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of an analytic scene's key)
+
+
 def config_key(config: dict[str, dict[str, Any]], sections: tuple[str, ...]) -> str:
-    """A stable text key of some sections (for caches)."""
-    return repr([(s, sorted(config[s].items())) for s in sections])
+    """A stable text key of some sections (for caches and saved agents). An analytic tissue is keyed
+    as before the fem model existed (resolved E and nu, no FE keys), so caches and agents made then
+    stay valid."""
+    keyed = dict(config)
+    t = config.get("tissue")
+    if t is not None and t["model"] == "analytic":
+        E, nu = material(t)
+        keyed["tissue"] = {**{k: v for k, v in t.items() if k not in FE_KEYS}, "E": E, "nu": nu}
+    return repr([(s, sorted(keyed[s].items())) for s in sections])
 

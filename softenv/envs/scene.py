@@ -32,7 +32,6 @@ from .config import config_key, material
 
 _SCENES: dict[str, "Scene"] = {}
 DEVICE_BOX_KEYS = ("insertion_deg", "lateral_deg", "max_normal_force", "max_sideways_force")
-FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of an analytic scene's cache key)
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,12 +131,10 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
     # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not)
     t = config["tissue"]
     box = {"device": {k: config["device"][k] for k in DEVICE_BOX_KEYS}}
-    E, nu = material(t)
-    if t["model"] == "analytic":    # keyed as before the fem model existed: those caches stay valid
-        box["tissue"] = {**{k: v for k, v in t.items() if k not in FE_KEYS}, "E": E, "nu": nu}
     key = config_key({**config, **box}, ("tissue", "mesh", "shape_model", "response", "device"))
     if key in _SCENES:
         return _SCENES[key]
+    E, nu = material(t)
     tissue = TissueParams(law=t["law"], E=E, nu=nu, radius=t["radius"], patch_radius=t["patch_radius"])
     mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], tissue.radius)
     layout = DorsumLayout(tissue.radius)
