@@ -26,8 +26,8 @@ from softenv.envs.world import World
 from softenv.parallel import Job, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
-from .evaluate import (CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, ideal_counterpart,
-                       normalized_scores, scene_kwargs)
+from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
+from .planner import TrajectoryOracle
 from .policies import BASELINES, PlanningOracle, ZeroPolicy, applies, make_baseline
 
 
@@ -39,16 +39,19 @@ class Plan:
     seeds: dict[str, int]                              # scene -> training seeds per agent
     timesteps: dict[str, int | None] = field(default_factory=dict)   # agent -> budget (None: YAML)
     episodes: int = 100
+    oracle: dict[str, Any] = field(default_factory=dict)   # TrajectoryOracle settings (laryngoscope scenes)
 
 
 QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
+QUICK_ORACLE_ITERATIONS = 3      # the quick run's device oracle: a short search (its 100 is weaker; the report says so)
 FIVE_SEEDS = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 
 
 def quick_plan() -> Plan:
     """Every baseline on one ideal and one laryngoscope scene; agents (briefly) on the ideal one only."""
     return Plan(list(QUICK_SCENES), list(BASELINES), list(ALGOS), {"SoftSphere-v0": 1, "SoftSphereHaptic-v0": 0},
-                {"ppo": 50_000, "sac": 10_000, "td3": 10_000, "sac-her": 10_000})
+                {"ppo": 50_000, "sac": 10_000, "td3": 10_000, "sac-her": 10_000},
+                oracle={"candidates": 8, "iterations": QUICK_ORACLE_ITERATIONS, "elites": 2})
 
 
 def full_plan() -> Plan:
@@ -78,7 +81,7 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
     the long ones first (agents, then model inversions), so parallel workers finish together."""
     out: list[Job] = []
     for scene in plan.scenes:
-        out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes)))
+        out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes, plan.oracle)))
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents:
@@ -91,16 +94,23 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
     return sorted(out, key=expected)
 
 
-def anchor_job(scene: str, episodes: int) -> tuple[np.ndarray, np.ndarray]:
+def anchor_job(scene: str, episodes: int, oracle_settings: dict[str, Any]
+               ) -> tuple[np.ndarray, np.ndarray, Episodes | None]:
     """The normalized score's anchors on the scene's test targets: the summed shape error of no force
-    (0) and of the planning oracle (100), on the scene's ideal-device counterpart (on a laryngoscope
-    scene the oracle's force acts at once: a bound no device reaches)."""
-    _, kwargs = ideal_counterpart(scene)
+    (0) and of the oracle (100). On the ideal device the oracle is :class:`PlanningOracle` (its row
+    comes from its own baseline job); on the laryngoscope it is :class:`TrajectoryOracle`, which plans
+    every episode through the device from the scripted expert's actions, and its episodes are
+    returned too (the table's oracle row)."""
+    _, kwargs = scene_kwargs(scene)
     kwargs.pop("obs_mode")
     world = World(make_config(**kwargs))
-    zero = evaluate(ZeroPolicy(world), scene, episodes, ideal=True)
-    oracle = evaluate(PlanningOracle(world), scene, episodes, ideal=True)
-    return zero.values["error_sum_mm"], oracle.values["error_sum_mm"]
+    zero = evaluate(ZeroPolicy(world), scene, episodes)
+    if world.device_kind == "ideal":
+        return zero.values["error_sum_mm"], evaluate(PlanningOracle(world), scene, episodes).values["error_sum_mm"], None
+    planner = TrajectoryOracle(scene, **oracle_settings)
+    planner.plan(make_baseline("expert", world), episodes)
+    oracle = evaluate(planner, scene, episodes)
+    return zero.values["error_sum_mm"], oracle.values["error_sum_mm"], oracle
 
 
 def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
@@ -145,7 +155,10 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         timings[anchors.key] = anchors.wall_s
         if not anchors.ok:
             continue
-        anchored = lambda e: _anchored(e, *anchors.value)  # noqa: E731
+        zero, oracle, planned = anchors.value
+        anchored = lambda e: _anchored(e, zero, oracle)  # noqa: E731
+        if planned is not None:
+            summaries.append(_with(anchored(planned).summary(), kind="oracle (CEM through the device)", seeds=1))
         for name in scene_baselines(plan, scene):
             r = results[f"{scene} {name}"]
             timings[r.key] = r.wall_s
@@ -179,6 +192,11 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))
     return summaries
+
+
+def _oracle_text(plan: Plan) -> str:
+    settings = {**TrajectoryOracle.DEFAULTS, **plan.oracle}
+    return ", ".join(f"{k} {v}" for k, v in settings.items())
 
 
 def _anchored(episodes: Episodes, zero: np.ndarray, oracle: np.ndarray) -> Episodes:
@@ -278,9 +296,10 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"agents, pooled); training seeds per agent: {plan.seeds}; agent budgets (env steps): {budgets}. Cells: "
           "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
           "E_oracle) per episode, E = the episode's summed RMS shape error on its target; 0 = no force, 100 = the planning "
-          "oracle (the true response and creep planned ahead, `baselines.policies.PlanningOracle`; on the laryngoscope "
-          "scenes it acts through the ideal device: a bound no device reaches). Decision time: one observation, "
-          "median.\n",
+          "oracle: on the ideal device the true response and creep planned ahead (`baselines.policies.PlanningOracle`), "
+          "on the laryngoscope every episode planned through the device, contact and tissue by the cross-entropy "
+          f"method from the scripted expert's actions (`baselines.planner.TrajectoryOracle`, {_oracle_text(plan)}; "
+          "its decision time is its planning time per control step). Decision time: one observation, median.\n",
           format_table(summaries), "",
           *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),

@@ -42,16 +42,6 @@ def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, A
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
-def ideal_counterpart(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, Any]]:
-    """The scene with the ideal device in place of its own (same tissue, dynamics, control period,
-    horizon and targets): where the benchmark's oracle plans for a laryngoscope scene."""
-    env_id, kwargs = scene_kwargs(scene, obs_mode)
-    if env_id not in HAPTIC_SCENES:
-        return env_id, kwargs
-    kwargs["device"] = {**kwargs.get("device", {}), "kind": "ideal"}
-    return "SoftSphere-v0", kwargs
-
-
 def device_kind(scene: str) -> str:
     """``"laryngoscope"`` for the SoftSphereHaptic scenes, ``"ideal"`` otherwise."""
     return "laryngoscope" if scene_kwargs(scene)[0] in HAPTIC_SCENES else "ideal"
@@ -83,11 +73,11 @@ class Episodes:
         return out
 
 
-def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000, ideal: bool = False) -> Episodes:
-    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin); with
-    ``ideal``, on the scene's :func:`ideal_counterpart` (the same targets)."""
+def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int] = 1000) -> Episodes:
+    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin), env ``i``
+    seeded ``seed + i`` (or ``seed[i]``). A policy that plans offline reports its own ``decision_us``."""
     obs_mode = getattr(policy, "obs_mode", "vector")
-    env_id, kwargs = ideal_counterpart(scene, obs_mode) if ideal else scene_kwargs(scene, obs_mode)
+    env_id, kwargs = scene_kwargs(scene, obs_mode)
     horizon = kwargs["task"].get("horizon", gym.spec(env_id).max_episode_steps)      # the scene's, over the id's
     venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", max_episode_steps=horizon,
                         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
@@ -120,7 +110,9 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int = 1000, ide
     values = {"final_error_mm": final["shape_error_mm"], "success": final["is_success"].astype(np.float64),
               "normalized_score": final["normalized_score"], "steps_to_success": first_success,
               "peak_force_N": final["peak_force_N"], "error_sum_mm": error_sum, **{key: final[key] for key in CLINICAL if key in final}}
-    return Episodes(getattr(policy, "name", str(policy)), scene, values, decision_latency_us(policy, obs))
+    decision_us = getattr(policy, "decision_us", None)
+    return Episodes(getattr(policy, "name", str(policy)), scene, values,
+                    decision_us if decision_us is not None else decision_latency_us(policy, obs))
 
 
 def decision_latency_us(policy: Any, obs: np.ndarray, calls: int = 200) -> float:

@@ -1,0 +1,158 @@
+"""The benchmark's oracle on the laryngoscope scenes: trajectory optimisation through the true model.
+
+On the ideal device one step decides everything, and :class:`~baselines.policies.PlanningOracle`
+solves it exactly. Through the laryngoscope the shape error summed over the episode depends on the
+whole hand trajectory (the blade must be inserted, pressed and swept, through a coupling, against
+the incisors), so the oracle plans the whole episode in the scene's own simulator -- device,
+contact, response and creep, the same code the policies are scored on. Every quantity of an episode
+(start state, target, target schedule) is known to the oracle from the evaluation seed, and the
+simulator is deterministic, so an open-loop action sequence optimised for an episode is also its
+best closed-loop behaviour: no feedback can do better than a plan that already knows every outcome.
+
+The optimiser is the cross-entropy method (CEM) on the summed shape error itself (the score's ``E``):
+
+* the plan is ``clip(base + interp(knots))``: a warm start ``base`` (the scripted expert's own
+  actions, recorded) plus a correction given at knots every ``knot_every`` control steps and
+  linearly interpolated between them, which keeps the search smooth and its dimension small
+  (51 knots x 4 for a 250-step episode);
+* every iteration samples ``candidates - 1`` corrections per episode around the current mean, rolls
+  them all out at once on the batched twin (one row per candidate), and refits mean and spread to the
+  ``elites`` best; the best plan so far is always re-entered as a candidate (elitism), so the plan
+  never gets worse than the warm start;
+* everything is seeded, so the plan (and the score's 100) is reproducible bit for bit.
+
+Why not MPC over a receding horizon: with a model this exact a receding horizon only truncates the
+cost (the error still to come after the horizon), and its per-step replanning costs the horizon's
+rollouts at every step; whole-episode shooting uses the same rollouts on the true objective.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from .evaluate import evaluate
+
+
+class ReplayPolicy:
+    """Plays fixed action sequences ``(n, H, 4)``: row ``i`` of every batch gets ``actions[i, t]`` at
+    the episode's step ``t`` (one batch call per step). A single row (a latency probe) gets row 0's
+    last action."""
+
+    def __init__(self, actions: np.ndarray, name: str = "replay") -> None:
+        self.actions = np.asarray(actions, dtype=np.float32)
+        self.name = name
+        self._t = 0
+
+    def reset(self) -> None:
+        self._t = 0
+
+    def predict(self, obs: Any) -> np.ndarray:
+        rows = obs["observation"] if isinstance(obs, dict) else np.asarray(obs)
+        if rows.ndim == 1:
+            return self.actions[0, -1]
+        if len(rows) != len(self.actions):
+            raise ValueError(f"{self.name}: a batch of {len(rows)} rows; the plan has {len(self.actions)} episodes")
+        t = min(self._t, self.actions.shape[1] - 1)
+        self._t += 1
+        return self.actions[:, t]
+
+
+class RecordingPolicy:
+    """Wraps a policy and keeps the actions it gave, step by step (the oracle's warm start)."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        self.name = policy.name
+        self.actions: list[np.ndarray] = []
+        self.recording = True
+
+    def reset(self) -> None:
+        self.policy.reset()
+        self.actions = []
+
+    def predict(self, obs: Any) -> np.ndarray:
+        action = self.policy.predict(obs)
+        if self.recording and np.ndim(action) == 2:
+            self.actions.append(np.array(action, dtype=np.float32))
+        return action
+
+
+class TrajectoryOracle(ReplayPolicy):
+    """The whole-episode CEM planner through the device (see the module docstring); after
+    :meth:`plan` it replays its plans as a policy.
+
+    Args:
+        scene: the benchmark scene (:data:`baselines.evaluate.SCENES`) it plans on.
+        candidates: rollouts per episode and iteration (the best so far among them).
+        iterations: CEM iterations.
+        elites: the best candidates the mean and spread are refitted to.
+        knot_every: control steps between the correction's knots.
+        sigma: the correction's initial spread, in action units.
+        seed: the sampler's seed.
+    """
+
+    DEFAULTS = {"candidates": 16, "iterations": 30, "elites": 4, "knot_every": 25, "sigma": 0.15, "seed": 0}
+
+    def __init__(self, scene: str, candidates: int = 16, iterations: int = 30, elites: int = 4, knot_every: int = 25,
+                 sigma: float = 0.15, seed: int = 0) -> None:
+        for name, value, low in (("candidates", candidates, 2), ("iterations", iterations, 0), ("elites", elites, 1),
+                                 ("knot_every", knot_every, 1)):
+            if int(value) != value or value < low:
+                raise ValueError(f"{name}={value!r}: must be an integer >= {low}")
+        if elites >= candidates:
+            raise ValueError(f"elites={elites} must be below candidates={candidates}")
+        if not np.isfinite(sigma) or sigma <= 0:
+            raise ValueError(f"sigma={sigma!r}: must be a positive finite number of action units")
+        super().__init__(np.zeros((1, 1, 4)), "oracle")
+        self.scene = scene
+        self.candidates, self.iterations, self.elites = candidates, iterations, elites
+        self.knot_every, self.sigma, self.seed = knot_every, sigma, seed
+        self.history: list[float] = []        # the mean best error sum after each iteration (mm x steps)
+        self.decision_us = float("nan")       # planning wall time per decision of the plan
+
+    def plan(self, warm_start: Any, episodes: int, seed: int = 1000) -> np.ndarray:
+        """Plan the ``episodes`` evaluation episodes seeded ``seed, seed + 1, ...`` (as
+        :func:`~baselines.evaluate.evaluate` seeds them), starting from ``warm_start``'s actions;
+        returns each episode's best summed shape error."""
+        started = time.perf_counter()
+        recorder = RecordingPolicy(warm_start)
+        best_error = evaluate(recorder, self.scene, episodes, seed).values["error_sum_mm"]
+        base = np.stack(recorder.actions, axis=1).astype(np.float64)        # (n, H, 4)
+        n, horizon = base.shape[:2]
+        knots = np.arange(0, horizon + self.knot_every, self.knot_every)
+        weights = _interpolation(horizon, knots)                            # (H, M)
+        rng = np.random.default_rng(self.seed)
+        mean = np.zeros((n, len(knots), 4))
+        best = mean.copy()
+        spread = np.full_like(mean, self.sigma)
+        seeds = [seed + i for i in range(n) for _ in range(self.candidates)]
+        self.history = [float(best_error.mean())]
+        for _ in range(self.iterations):
+            noise = rng.standard_normal((n, self.candidates - 1, len(knots), 4)) * spread[:, None]
+            trial = np.concatenate([best[:, None], mean[:, None] + noise], axis=1)     # (n, K, M, 4)
+            actions = np.clip(base[:, None] + np.einsum("tm,nkmc->nktc", weights, trial), -1.0, 1.0)
+            replay = ReplayPolicy(actions.reshape(n * self.candidates, horizon, 4))
+            error = evaluate(replay, self.scene, n * self.candidates, seeds).values["error_sum_mm"]
+            error = error.reshape(n, self.candidates)
+            order = np.argsort(error, axis=1, kind="stable")
+            improved = error[np.arange(n), order[:, 0]] < best_error
+            best[improved] = trial[improved, order[improved, 0]]
+            best_error = np.where(improved, error[np.arange(n), order[:, 0]], best_error)
+            elite = np.take_along_axis(trial, order[:, :self.elites, None, None], axis=1)
+            mean = elite.mean(axis=1)
+            spread = np.maximum(elite.std(axis=1), 0.02 * self.sigma)
+            self.history.append(float(best_error.mean()))
+        self.actions = np.clip(base + np.einsum("tm,nmc->ntc", weights, best), -1.0, 1.0).astype(np.float32)
+        self.decision_us = (time.perf_counter() - started) / (n * horizon) * 1e6
+        return best_error
+
+
+def _interpolation(horizon: int, knots: np.ndarray) -> np.ndarray:
+    """``(horizon, len(knots))`` weights of piecewise-linear interpolation between knots at those steps."""
+    t = np.arange(horizon, dtype=np.float64)
+    eye = np.eye(len(knots))
+    return np.stack([np.interp(t, knots, eye[j]) for j in range(len(knots))], axis=1)
+

@@ -1,0 +1,62 @@
+"""The laryngoscope scenes' oracle: whole-episode CEM through the device (baselines.planner)."""
+
+import numpy as np
+import pytest
+
+from baselines.evaluate import evaluate, scene_kwargs
+from baselines.planner import RecordingPolicy, ReplayPolicy, TrajectoryOracle
+from baselines.policies import make_baseline
+from softenv.envs.config import make_config
+from softenv.envs.world import World
+
+SCENE = "SoftSphereHaptic-v0"
+
+
+@pytest.fixture(scope="module")
+def expert():
+    kwargs = scene_kwargs(SCENE)[1]
+    kwargs.pop("obs_mode")
+    return make_baseline("expert", World(make_config(**kwargs)))
+
+
+def test_replaying_a_closed_loop_rollout_open_loop_gives_the_same_episodes(expert):
+    """The oracle's premise: the scene is deterministic, so the actions a feedback policy gave, played
+    back blind on the same seeds, give the same errors (to rounding: rows sit elsewhere in the space)."""
+    recorder = RecordingPolicy(expert)
+    closed = evaluate(recorder, SCENE, episodes=3).values["error_sum_mm"]
+    actions = np.stack(recorder.actions, axis=1)
+    assert actions.shape == (3, 250, 4)
+    replayed = evaluate(ReplayPolicy(actions), SCENE, episodes=3).values["error_sum_mm"]
+    np.testing.assert_allclose(replayed, closed, rtol=1e-9)
+    # the same actions on other seeds (other targets) are another matter
+    other = evaluate(ReplayPolicy(actions), SCENE, episodes=3, seed=[1001, 1002, 1000]).values["error_sum_mm"]
+    assert not np.allclose(other, closed, rtol=1e-3)
+
+
+def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
+    """Elitist CEM: never worse than the expert on any episode, better on average; the plan it returns
+    is what the evaluation then measures; and the same seed gives the same plan bit for bit."""
+    warm = evaluate(expert, SCENE, episodes=3).values["error_sum_mm"]
+    oracle = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
+    planned = oracle.plan(expert, episodes=3)
+    assert np.all(planned <= warm * (1 + 1e-9)) and planned.mean() < 0.97 * warm.mean()
+    assert oracle.history[0] == pytest.approx(warm.mean()) and np.all(np.diff(oracle.history) <= 1e-9)
+    measured = evaluate(oracle, SCENE, episodes=3)
+    np.testing.assert_allclose(measured.values["error_sum_mm"], planned, rtol=1e-9)
+    assert measured.decision_us == oracle.decision_us > 0
+    again = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
+    again.plan(expert, episodes=3)
+    np.testing.assert_array_equal(again.actions, oracle.actions)
+
+
+def test_the_oracle_refuses_bad_settings():
+    for kwargs, match in (({"candidates": 1}, "candidates=1"), ({"elites": 16}, "elites=16 must be below candidates=16"),
+                          ({"sigma": float("nan")}, "sigma=nan"), ({"knot_every": 0}, "knot_every=0"),
+                          ({"iterations": 2.5}, "iterations=2.5")):
+        with pytest.raises(ValueError, match=match):
+            TrajectoryOracle(SCENE, **kwargs)
+
+
+def test_replay_refuses_a_batch_of_another_size():
+    with pytest.raises(ValueError, match="a batch of 2 rows; the plan has 3 episodes"):
+        ReplayPolicy(np.zeros((3, 5, 4))).predict(np.zeros((2, 7)))
