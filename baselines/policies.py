@@ -19,9 +19,9 @@ force: there every force-giving policy above hands its force (the paper's haptic
 reverse: target ``b*`` -> force) to :class:`softenv.control.HandController`, which realises it
 through the blade by the textbook sequence (insert, lift along the handle, sweep). ``expert`` is
 that controller on the exact response's inversion: the scripted expert, a clinician who knows
-which force gives which shape. ``oracle`` is the ideal device's (a planning oracle through the
-device is open work), so it is not offered there; the benchmark runs it on the scene's ideal-device
-counterpart as the score's 100.
+which force gives which shape. ``oracle`` is the ideal device's, so it is not offered there; the
+benchmark's 100 on those scenes is :class:`baselines.planner.TrajectoryOracle`, which plans every
+episode through the device.
 """
 
 from __future__ import annotations

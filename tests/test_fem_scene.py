@@ -186,3 +186,20 @@ def test_fe_request_follows_the_scene_config():
     request = default_request(tissue={"fe_cells": 6}, shape_model={"n_loads": 8, "seed": 2})
     assert request.fe.cells_per_side == 6 and request.n_loads == 2 and request.seed == 2
     assert dataclasses.replace(request, seed=0).difference(request) == "seed=2 where this scene needs seed=0"
+
+
+def test_an_analytic_scene_is_keyed_as_before_the_fem_model():
+    """Caches and saved agents made before tissue.model existed keep their keys: an analytic tissue is
+    keyed by its resolved E and nu without the FE keys, so leaving E at its default or giving that value
+    is the same scene; an FE tissue keeps its own keys."""
+    from softenv.envs.config import config_key, material
+
+    sections = ("tissue", "mesh", "device", "task")
+    default = make_config()
+    E, nu = material(default["tissue"])
+    key = config_key(default, sections)
+    assert key == config_key(make_config(tissue={"E": E, "nu": nu}), sections)
+    assert "fe_cells" not in key and "'model'" not in key and f"('E', {E!r})" in key
+    assert key != config_key(make_config(tissue={"E": 2 * E}), sections)
+    fem = config_key(make_config(tissue={"model": "fem"}), sections)
+    assert "('fe_cells', 8)" in fem and fem != key

@@ -92,8 +92,8 @@ class SoftSphereHapticEnv(SoftSphereEnv):
     ``normalized_score`` keeps SoftSphere's running anchors: 0 = no motion (the blade never touches,
     the shape stays at rest), 100 = the ideal device holding the target's equilibrium shape from the
     first step. A device with mass, coupling and speed limits needs time to get there, so scores here
-    stay below 100. ``softenv compare`` normalizes by its planning oracle on the scene's ideal-device
-    counterpart instead (``baselines.policies.PlanningOracle``), a bound no device reaches.
+    stay below 100. ``softenv compare`` normalizes by its oracle that plans every episode through this
+    device instead (``baselines.planner.TrajectoryOracle``).
 
     ## Starting State
 
