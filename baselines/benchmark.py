@@ -11,6 +11,7 @@ budgets over 5 training seeds on SoftSphere-v0 and SoftSphereHaptic-v0 and 3 els
 from __future__ import annotations
 
 import csv
+import inspect
 import json
 import platform
 import time
@@ -194,7 +195,10 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
 
 
 def _oracle_text(plan: Plan) -> str:
-    settings = {**TrajectoryOracle.DEFAULTS, **plan.oracle}
+    """The device oracle's search settings as the plan runs it (its defaults, then the plan's)."""
+    defaults = {name: p.default for name, p in inspect.signature(TrajectoryOracle).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+    settings = {**defaults, **plan.oracle}
     return ", ".join(f"{k} {v}" for k, v in settings.items())
 
 

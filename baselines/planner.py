@@ -94,8 +94,6 @@ class TrajectoryOracle(ReplayPolicy):
         seed: the sampler's seed.
     """
 
-    DEFAULTS = {"candidates": 16, "iterations": 30, "elites": 4, "knot_every": 25, "sigma": 0.15, "seed": 0}
-
     def __init__(self, scene: str, candidates: int = 16, iterations: int = 30, elites: int = 4, knot_every: int = 25,
                  sigma: float = 0.15, seed: int = 0) -> None:
         for name, value, low in (("candidates", candidates, 2), ("iterations", iterations, 0), ("elites", elites, 1),
