@@ -275,9 +275,21 @@ class SoftSphereVectorEnv(VectorEnv):
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
+    def __new__(cls, *args: Any, backend: str = "numpy", **kwargs: Any) -> Any:
+        # backend="torch": the ideal-device twin on torch tensors (softenv.envs.torch_twin; imports torch)
+        if backend == "numpy":
+            return super().__new__(cls)
+        if backend != "torch":
+            raise ValueError(f"backend={backend!r} must be 'numpy' or 'torch'")
+        if cls is not SoftSphereVectorEnv:
+            raise ValueError(f"backend='torch' covers the ideal-device ids; {cls.__name__} steps with numpy only")
+        from .torch_twin import SoftSphereTorchVectorEnv
+
+        return SoftSphereTorchVectorEnv(*args, **kwargs)
+
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-                 base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
+                 base_scene: dict[str, Any] | None = None, backend: str = "numpy", **scene: Any) -> None:
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
         check_render_mode(render_mode)

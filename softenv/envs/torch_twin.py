@@ -1,0 +1,301 @@
+"""The batched SoftSphere twin in torch: the ideal-device ids on CPU or GPU tensors.
+
+``gym.make_vec("SoftSphere-v0", num_envs=N, vectorization_mode="vector_entry_point", backend="torch",
+device="cuda", dtype=torch.float32)`` makes a :class:`SoftSphereTorchVectorEnv`. It takes actions and
+returns observations, rewards, flags and infos as tensors on ``device``, with the numpy twin's rules
+(:class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`): the same world (scene, response table,
+targets, dynamics, reward weights), the same seeding (per-env numpy generators draw the targets at
+reset, so both twins play the same episodes), the same autoreset modes. In float64 it equals the numpy
+twin to rounding (the response's corner sum runs in another order: tested within 1e-12 over 1,000
+steps); in float32 within 1e-5 of float64 (the score's running sums stay float64: tested). The
+observation is float32 like the observation space.
+
+What it expresses: the tabulated response (``response.model = "exact"``, analytic or FE tissue, any
+law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
+dict. Not: the laryngoscope (pymunk has no tensors), regressor responses and vertex observations.
+
+Host work stays at episode starts: a reset draws targets on the host and copies them in. Inside
+``step`` the only host synchronisations are the action check (``check_actions=False`` skips it) and
+the autoreset of finished envs (one ``nonzero`` per step, and the target draw when an episode ends).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..response import TabulatedResponse
+from .config import scene_config
+from .world import World
+
+
+class SoftSphereTorchVectorEnv(VectorEnv):
+    """``num_envs`` ideal-device SoftSphere envs on torch tensors (see the module docstring).
+
+    Args:
+        device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...).
+        dtype: ``torch.float64`` (default) or ``torch.float32`` for the state and rewards.
+        check_actions: check each step's actions (shape, finite, within [-1, 1]): one host sync.
+        Others as :class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`.
+
+    Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
+    ``info["final_obs"]`` holds every env's last observation (rows where ``info["_final_obs"]``) and
+    ``info["final_info"]`` the ended episodes' infos.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
+                 max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+                 base_scene: dict[str, Any] | None = None, device: str | torch.device = "cpu",
+                 dtype: torch.dtype = torch.float64, check_actions: bool = True, **scene: Any) -> None:
+        from .soft_sphere import _autoreset_mode
+
+        if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
+        if render_mode is not None:
+            raise ValueError(f"render_mode={render_mode!r}: the torch backend does not render; use backend='numpy'")
+        if dtype not in (torch.float64, torch.float32):
+            raise ValueError(f"dtype={dtype!r} must be torch.float64 or torch.float32")
+        if obs_mode not in ("vector", "dict"):
+            raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
+        if max_episode_steps is not None:
+            scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
+        world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
+        if world.device_kind != "ideal":
+            raise ValueError(f"device.kind={world.device_kind!r}: the torch backend covers the ideal device only "
+                             "(the laryngoscope's physics is pymunk); use backend='numpy'")
+        table = world.scene.response
+        if not isinstance(table, TabulatedResponse):
+            raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
+                             "tabulated response (response.model='exact'); use backend='numpy' for regressors")
+        self.world, self.device, self.dtype, self.check_actions = world, torch.device(device), dtype, check_actions
+        self.autoreset_mode = _autoreset_mode(autoreset_mode)
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.num_envs, self.render_mode = int(num_envs), None
+        self.single_action_space, self.single_observation_space = world.action_space, world.observation_space
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        t = self._tensor
+        dev = world.device
+        self._mid, self._half = t(dev.mid), t(dev.half)
+        self._low, self._inv_step = t(table.low_), t(table.inv_step_)
+        self._flat = t(table._flat)
+        self._strides = torch.as_tensor(table._strides_f, dtype=torch.float64, device=self.device)
+        self._bits = torch.as_tensor(table._bits, device=self.device)
+        self._offsets = torch.as_tensor(table._offsets, device=self.device)
+        self._inv_sqrt, self._sqrt_var, self._b_rest = t(world.inv_sqrt), t(world.sqrt_variance), t(world.b_rest)
+        self._rest_action = t(dev.rest_action.astype(np.float64))
+        self._rest_features = t(world.scene.rest_features)
+        n, k = self.num_envs, world.k
+        self._rows = torch.arange(n, device=self.device)
+        self._rngs = [np.random.default_rng() for _ in range(n)]
+        self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
+        self._features, self._prev = t(np.empty((n, 4))), t(np.empty((n, 4)))
+        self._t = torch.zeros(n, dtype=torch.int64, device=self.device)
+        self._agent_cum, self._peak = t(np.zeros(n), self._dtype_of("agent_cum")), t(np.zeros(n))
+        self._last_target = t(np.empty((n, k)))
+        self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._episode: dict[str, torch.Tensor] | None = None
+
+    def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device).to(dtype or self.dtype)
+
+    def _dtype_of(self, name: str) -> torch.dtype:
+        # the score's running sums stay float64 in either dtype: a float32 sum over an episode drifts by 1e-5
+        return torch.float64 if name in ("zero_cum", "oracle_cum", "agent_cum") else self.dtype
+
+    # -- gymnasium API --------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        from .soft_sphere import _target_option
+
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed has {len(seeds)} entries; num_envs={self.num_envs}")
+        rngs = [rng if s is None else gym.utils.seeding.np_random(s)[0] for rng, s in zip(self._rngs, seeds)]
+        target = _target_option(self.world, options)
+        self._rngs = rngs
+        episodes = self.world.start_episodes(self._rngs, [target] * self.num_envs)
+        self._episode = {name: self._tensor(getattr(episodes, name), self._dtype_of(name))
+                         for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
+        everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
+        self._start(everyone)
+        self._autoreset[:] = False
+        return self._observe(self._b, self._upcoming_target(), self._features, self._prev), {}
+
+    def step(self, actions: Any) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
+        if self._episode is None:
+            raise RuntimeError("call reset() before step()")
+        a = self._checked(actions)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            obs, reward, terminated, truncated, values = self._advance(a, torch.ones_like(self._autoreset))
+            done = terminated | truncated
+            _add_masked(infos, values, ~done)
+            final_obs = {key: v.clone() for key, v in obs.items()} if isinstance(obs, dict) else obs.clone()
+            final_info: dict[str, Any] = {}
+            _add_masked(final_info, values, done)
+            infos.update({"final_obs": final_obs, "_final_obs": done.clone(), "final_info": final_info,
+                          "_final_info": done.clone()})
+            return self._restart_rows(obs, done), reward, terminated, truncated, infos
+        reset_now = self._autoreset.clone()
+        obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
+        obs = self._restart_rows(obs, reset_now)
+        _add_masked(infos, values, ~reset_now)
+        self._autoreset = terminated | truncated
+        return obs, reward, terminated, truncated, infos
+
+    # -- the step -------------------------------------------------------------------------------
+
+    def _checked(self, actions: Any) -> torch.Tensor:
+        a = torch.as_tensor(actions, device=self.device)
+        if self.check_actions:
+            if tuple(a.shape) != (self.num_envs, 4):
+                raise ValueError(f"actions must have shape ({self.num_envs}, 4); got {tuple(a.shape)}")
+            if a.is_complex() or a.dtype == torch.bool:
+                raise ValueError(f"actions must be real numbers; got dtype {a.dtype}")
+            bad = ~((a >= -1.0) & (a <= 1.0))
+            if bool(bad.any()):
+                i, j = (int(x) for x in bad.nonzero()[0])
+                raise ValueError(f"actions[{i}, {j}] = {float(a[i, j])!r}: actions must be finite and within [-1, 1]")
+        return a.to(self.dtype)
+
+    def _response(self, x: torch.Tensor) -> torch.Tensor:
+        """The response table's multilinear interpolation (as :meth:`TabulatedResponse.lookup`)."""
+        t = (x - self._low) * self._inv_step
+        cell = torch.floor(t)
+        frac = t - cell
+        g = torch.stack([1.0 - frac, frac], dim=-1)                      # (N, d, 2)
+        w = g[:, 0, self._bits[:, 0]]
+        for j in range(1, x.shape[1]):
+            w = w * g[:, j, self._bits[:, j]]
+        base = (cell.to(torch.float64) @ self._strides).to(torch.int64)
+        rows = self._flat[base[:, None] + self._offsets]                 # (N, 2^d, k)
+        return torch.bmm(w[:, None, :], rows)[:, 0]
+
+    def _advance(self, a: torch.Tensor, stepped: torch.Tensor) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor,
+                                                                         dict[str, torch.Tensor]]:
+        """The numpy twin's ``_advance`` (the stepped envs commit their state) on tensors."""
+        w, ep = self.world, self._episode
+        T, H = ep["sq_ref"].shape[1], w.horizon
+        ti = torch.clamp(self._t, max=T - 1)
+        f = self._mid + a * self._half
+        g = self._response(f)
+        dyn = w.dynamics
+        if dyn.stateful:
+            z = self._z + (g - self._z) * dyn.move
+            b = dyn.r * g + dyn.one_minus_r * z
+        else:
+            z, b = self._z, g
+        target = ep["target_b"][self._rows, ti]
+        d = b - target
+        sq = torch.sum(d * d, dim=-1)
+        c = a - self._prev
+        change = torch.sum(c * c, dim=-1)
+        weights = w.weights
+        ratio = torch.sqrt(sq / ep["sq_ref"][self._rows, ti])
+        force = torch.sqrt(f[:, 2] * f[:, 2] + f[:, 3] * f[:, 3])
+        shape = -weights["shape_weight"] * ratio
+        force_term = -weights["force_weight"] * (torch.clamp(force - weights["safe_force"], min=0.0)
+                                                 / weights["safe_force"])
+        smooth = -weights["smoothness_weight"] * (change / 4.0)
+        agent_cum = self._agent_cum + ratio.to(torch.float64)
+        peak = torch.maximum(self._peak, force)
+        hi = torch.clamp(self._t, max=H - 1)
+        zero, oracle = ep["zero_cum"][self._rows, hi], ep["oracle_cum"][self._rows, hi]
+        score = 100.0 * (zero - agent_cum) / torch.clamp(zero - oracle, min=1e-12)
+        success = ratio < w.tolerance
+        s = stepped
+        rows = s[:, None]
+        self._z = torch.where(rows, z, self._z)
+        self._b = torch.where(rows, b, self._b)
+        self._prev = torch.where(rows, a, self._prev)
+        self._features = torch.where(rows, f, self._features)
+        self._agent_cum = torch.where(s, agent_cum, self._agent_cum)
+        self._peak = torch.where(s, peak, self._peak)
+        self._last_target = torch.where(rows, target, self._last_target)
+        self._t = self._t + s.to(torch.int64)
+        terminated = (success & w.terminate_on_success) & s
+        truncated = (self._t >= H) & s
+        values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
+                  "shape_error_mm": torch.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
+                  "is_success": success, "normalized_score": score}
+        reward = shape + force_term + smooth
+        if w.obs_mode == "dict":
+            obs = self._observe(self._b, self._last_target, self._features, self._prev)
+            shape = self._goal_shape_term(obs["achieved_goal"], obs["desired_goal"])
+            reward = shape + (force_term + smooth)
+            values["reward_shape"] = shape
+        else:
+            obs = self._observe(self._b, self._upcoming_target(), self._features, self._prev)
+        return obs, torch.where(s, reward, torch.zeros_like(reward)), terminated, truncated, values
+
+    def _goal_shape_term(self, achieved: torch.Tensor, desired: torch.Tensor) -> torch.Tensor:
+        """:meth:`World.goal_shape_term` on tensors: the shape term from the float32 goals."""
+        b = achieved.to(self.dtype) * self._sqrt_var
+        target = desired.to(self.dtype) * self._sqrt_var
+        d = b - target
+        r = target - self._b_rest
+        sq_ref = torch.clamp(torch.sum(r * r, dim=-1), min=self.world.floor_sq)
+        return -self.world.weights["shape_weight"] * torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref)
+
+    def _observe(self, b: torch.Tensor, target: torch.Tensor, features: torch.Tensor, prev: torch.Tensor) -> Any:
+        k = self.world.k
+        obs = torch.cat([b * self._inv_sqrt, target * self._inv_sqrt, (features - self._mid) / self._half, prev],
+                        dim=-1).to(torch.float32)
+        if self.world.obs_mode == "dict":
+            return {"observation": obs[:, 2 * k:].clone(), "achieved_goal": obs[:, :k].clone(),
+                    "desired_goal": obs[:, k:2 * k].clone()}
+        return obs
+
+    def _upcoming_target(self) -> torch.Tensor:
+        T = self._episode["sq_ref"].shape[1]
+        return self._episode["target_b"][self._rows, torch.clamp(self._t, max=T - 1)]
+
+    # -- episode starts (host: the targets come from the per-env numpy generators) ---------------
+
+    def _start(self, mask: torch.Tensor) -> None:
+        rows = mask[:, None]
+        self._z = torch.where(rows, self._b_rest, self._z)
+        self._b = torch.where(rows, self._b_rest, self._b)
+        self._features = torch.where(rows, self._rest_features, self._features)
+        self._prev = torch.where(rows, self._rest_action, self._prev)
+        self._t = torch.where(mask, torch.zeros_like(self._t), self._t)
+        self._agent_cum = torch.where(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
+        self._peak = torch.where(mask, torch.zeros_like(self._peak), self._peak)
+        self._last_target = torch.where(rows, self._episode["target_b"][:, 0], self._last_target)
+
+    def _restart_rows(self, obs: Any, mask: torch.Tensor) -> Any:
+        """Draw new episodes for the masked envs, reset their state and write their first observations."""
+        idx = mask.nonzero()[:, 0].tolist()
+        if not idx:
+            return obs
+        new = self.world.start_episodes([self._rngs[i] for i in idx])
+        rows = torch.as_tensor(idx, device=self.device)
+        for name, value in self._episode.items():
+            value[rows] = self._tensor(getattr(new, name), value.dtype)
+        self._start(mask)
+        fresh = self._observe(self._b, self._episode["target_b"][:, 0], self._features, self._prev)
+        if isinstance(obs, dict):
+            return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
+        return torch.where(mask[:, None], fresh, obs)
+
+
+def _add_masked(infos: dict[str, Any], values: dict[str, torch.Tensor], mask: torch.Tensor) -> None:
+    """Infos as the numpy twin makes them (zeros where the mask is off, plus ``_key``), on tensors; always
+    present (no host branch on the mask)."""
+    for key, value in values.items():
+        infos[key] = torch.where(mask, value, torch.zeros((), dtype=value.dtype, device=value.device))
+        infos[f"_{key}"] = mask.clone()

@@ -1,0 +1,123 @@
+"""The batched twin on torch tensors (softenv.envs.torch_twin) against the numpy twin."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import softenv  # noqa: E402,F401  (registers the ids)
+
+CASES = [("SoftSphere-v0", "next_step", "vector"), ("SoftSphereViscoelastic-v0", "same_step", "vector"),
+         ("SoftSphereProcedure-v0", "same_step", "dict"), ("SoftSphere-v0", "next_step", "dict")]
+
+
+def _make(env_id, backend, **kwargs):
+    extra = {"backend": "torch", "dtype": kwargs.pop("dtype", torch.float64)} if backend == "torch" else {}
+    return gym.make_vec(env_id, vectorization_mode="vector_entry_point", **extra, **kwargs)
+
+
+def _close(a, b, rtol, atol=0.0):
+    a = np.asarray(a, dtype=np.float64)
+    b = b.double().numpy() if isinstance(b, torch.Tensor) else np.asarray(b, dtype=np.float64)
+    np.testing.assert_allclose(b, a, rtol=rtol, atol=atol)
+
+
+@pytest.mark.parametrize("env_id,mode,obs_mode", CASES)
+def test_float64_on_cpu_equals_the_numpy_twin_over_1000_steps(env_id, mode, obs_mode):
+    """Observations (float32, one ulp), rewards, flags and every info (1e-12) over 1,000 steps of the
+    same actions and seeds, through 10 autoresets of the mode under test."""
+    n = 4
+    ref = _make(env_id, "numpy", num_envs=n, autoreset_mode=mode, obs_mode=obs_mode)
+    env = _make(env_id, "torch", num_envs=n, autoreset_mode=mode, obs_mode=obs_mode)
+    obs_ref, _ = ref.reset(seed=7)
+    obs, _ = env.reset(seed=7)
+    actions = np.random.default_rng(0).uniform(-1, 1, (1000, n, 4)).astype(np.float32)
+    resets = 0
+    for a in actions:
+        for x, y in ((obs_ref, obs),) if not isinstance(obs_ref, dict) else ((obs_ref[k], obs[k]) for k in obs_ref):
+            _close(x, y, rtol=1e-6, atol=1e-7)
+        obs_ref, r_ref, te_ref, tr_ref, info_ref = ref.step(a)
+        obs, r, te, tr, info = env.step(torch.as_tensor(a))
+        _close(r_ref, r, rtol=1e-12, atol=1e-12)
+        assert np.array_equal(te_ref, te.numpy()) and np.array_equal(tr_ref, tr.numpy())
+        resets += int(np.sum(te_ref | tr_ref))
+        for key, value in info_ref.items():
+            if key in ("final_obs", "final_info"):
+                continue
+            _close(value, info[key], rtol=1e-12, atol=1e-12)
+        if "final_info" in info_ref:
+            for key, value in info_ref["final_info"].items():
+                _close(value, info["final_info"][key], rtol=1e-12, atol=1e-12)
+            for i in np.flatnonzero(info_ref["_final_obs"]):
+                last, mine = info_ref["final_obs"][i], info["final_obs"]
+                for x, y in ((last, mine[i]),) if not isinstance(last, dict) else ((last[k], mine[k][i]) for k in last):
+                    _close(x, y, rtol=1e-6, atol=1e-7)
+    assert resets >= 10 * n * 0.9
+
+
+@pytest.mark.parametrize("env_id", ["SoftSphere-v0", "SoftSphereViscoelastic-v0", "SoftSphereProcedure-v0"])
+def test_float32_stays_within_1e5_of_the_float64_reference(env_id):
+    kwargs = {"num_envs": 8}
+    e64, e32 = _make(env_id, "torch", **kwargs), _make(env_id, "torch", dtype=torch.float32, **kwargs)
+    e64.reset(seed=0)
+    e32.reset(seed=0)
+    generator = torch.Generator().manual_seed(0)
+    for _ in range(300):
+        a = torch.rand((8, 4), generator=generator) * 2 - 1
+        o64, r64, _, _, i64 = e64.step(a)
+        o32, r32, _, _, i32 = e32.step(a)
+        assert r32.dtype == torch.float32
+        _close(r64, r32, rtol=1e-5, atol=1e-5)
+        for key in ("shape_error_mm", "normalized_score", "force_N"):
+            _close(i64[key], i32[key], rtol=1e-5, atol=1e-5)
+        _close(o64, o32, rtol=0, atol=1e-5 * float(o64.abs().max()))
+
+
+def test_seeding_is_per_env_and_reproducible():
+    a = torch.as_tensor(np.random.default_rng(1).uniform(-1, 1, (50, 3, 4)), dtype=torch.float32)
+    runs = []
+    for seeds in ([5, 6, 7], 5, [9, 6, 7]):
+        env = _make("SoftSphere-v0", "torch", num_envs=3)
+        obs, _ = env.reset(seed=seeds)
+        trace = [obs]
+        for step in a:
+            trace.append(env.step(step)[0])
+        runs.append(torch.stack(trace))
+    assert torch.equal(runs[0], runs[1])                       # seed=5 seeds env i with 5 + i
+    assert torch.equal(runs[0][:, 1:], runs[2][:, 1:]) and not torch.equal(runs[0][:, 0], runs[2][:, 0])
+
+
+def test_what_the_torch_backend_cannot_express_is_refused_by_name():
+    with pytest.raises(ValueError, match="covers the ideal-device ids; SoftSphereHapticVectorEnv"):
+        _make("SoftSphereHaptic-v0", "torch", num_envs=2)
+    with pytest.raises(ValueError, match="response.model='poly2'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, response={"model": "poly2"})
+    with pytest.raises(ValueError, match="obs_mode='vertices'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, obs_mode="vertices")
+    with pytest.raises(ValueError, match="backend='jax' must be 'numpy' or 'torch'"):
+        gym.make_vec("SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="jax")
+    with pytest.raises(ValueError, match="dtype=torch.float16"):
+        _make("SoftSphere-v0", "torch", num_envs=2, dtype=torch.float16)
+
+
+def test_bad_actions_are_refused_by_index_and_change_nothing():
+    env = _make("SoftSphere-v0", "torch", num_envs=2)
+    obs, _ = env.reset(seed=0)
+    a = torch.zeros((2, 4))
+    a[1, 2] = float("nan")
+    with pytest.raises(ValueError, match=r"actions\[1, 2\] = nan"):
+        env.step(a)
+    with pytest.raises(ValueError, match=r"shape \(2, 4\)"):
+        env.step(torch.zeros((3, 4)))
+    # the refused steps left no trace: stepping now equals a fresh env's first step
+    fresh = _make("SoftSphere-v0", "torch", num_envs=2)
+    fresh.reset(seed=0)
+    assert torch.equal(env.step(torch.zeros((2, 4)))[0], fresh.step(torch.zeros((2, 4)))[0])
+
+
+def test_the_numpy_twin_imports_no_torch(heavy_modules_after):
+    code = ("import gymnasium as gym, softenv\n"
+            "env = gym.make_vec('SoftSphere-v0', num_envs=4, vectorization_mode='vector_entry_point')\n"
+            "env.reset(seed=0)\nenv.step(env.action_space.sample())")
+    assert "torch" not in heavy_modules_after(code)
