@@ -121,3 +121,15 @@ def test_the_numpy_twin_imports_no_torch(heavy_modules_after):
             "env = gym.make_vec('SoftSphere-v0', num_envs=4, vectorization_mode='vector_entry_point')\n"
             "env.reset(seed=0)\nenv.step(env.action_space.sample())")
     assert "torch" not in heavy_modules_after(code)
+
+
+def test_bench_reports_the_torch_twin_beside_the_numpy_twin(tmp_path):
+    from softenv import bench
+
+    rows = bench.run(True, tmp_path, ["torch"], command="softenv bench --quick --only torch", echo=lambda s: None)
+    names = [r.metric for r in rows]
+    assert any("numpy twin, 1024 envs" in name for name in names)
+    torch_rows = [r for r in rows if "torch twin on cpu" in r.metric]
+    assert len(torch_rows) == 2 and all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows)
+    gpu = [r for r in rows if "GPU" in r.metric or "on cuda" in r.metric]
+    assert gpu and (torch.cuda.is_available() or "not measured" in gpu[0].spread)

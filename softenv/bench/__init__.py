@@ -23,6 +23,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "response": ("softenv.bench.response", "bench_response"),
     "env": ("softenv.bench.env", "bench_env"),
     "sb3": ("softenv.bench.env", "bench_sb3"),
+    "torch": ("softenv.bench.env", "bench_torch"),
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
 }
 

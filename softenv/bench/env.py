@@ -1,11 +1,13 @@
 """Benchmarks of the environments: single-env steps through ``gym.make`` against CartPole-v1, the
 batched twin's throughput and memory per env, reset cost, scene build, table error, rendering; and
-the SB3 adapter against the twin it wraps (section ``sb3``)."""
+the SB3 adapter against the twin it wraps (section ``sb3``); the torch backend beside the numpy twin
+(section ``torch``)."""
 
 from __future__ import annotations
 
 import time
 import tracemalloc
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -67,12 +69,15 @@ def _fem_rows(quick: bool) -> list[Row]:
     return rows
 
 
-def twin_step_timing(env_id: str, n: int, calls: int, actions: list[np.ndarray] | None = None) -> Timing:
+def twin_step_timing(env_id: str, n: int, calls: int, actions: list[np.ndarray] | None = None,
+                     convert: Any = None, **make: Any) -> Timing:
     """Seconds per step of ``env_id``'s batched twin with ``n`` envs (5 repeats of ``calls`` steps;
-    pre-sampled random actions unless given)."""
-    venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+    pre-sampled random actions unless given, passed through ``convert`` (e.g. to tensors); ``make``:
+    more ``gym.make_vec`` arguments)."""
+    venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **make)
     venv.reset(seed=0)
     actions = actions if actions is not None else [venv.action_space.sample() for _ in range(16)]
+    actions = [convert(a) for a in actions] if convert is not None else actions
     venv.step(actions[0])
     samples = []
     for _ in range(5):
@@ -175,3 +180,32 @@ def _render_rows(quick: bool) -> list[Row]:
     env.close()
     return [Row("env", "rgb_array frames at 441 points (320 px, step + render)", fps, "frames/s",
                 f"IQR {1 / t.p75:.1f}-{1 / t.p25:.1f}", ">= 10/s", fps >= 10)]
+
+
+def bench_torch(quick: bool, reference: Timing) -> list[Row]:
+    """The torch twin (``backend="torch"``, same-step autoreset, no action check) beside the numpy
+    twin: on CPU tensors always, on CUDA when a GPU is present (else a row saying it was not measured)."""
+    try:
+        import torch
+    except ImportError as exc:
+        return [Row("torch", f"torch backend: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
+    torch.set_num_threads(1)
+    calls = 10 if quick else 40
+    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    rows = []
+    for n in (1024,) if quick else (1024, 16384):
+        numpy_rate = n / twin_step_timing("SoftSphere-v0", n, calls, autoreset_mode="same_step").median
+        rows.append(Row("torch", f"SoftSphere-v0: numpy twin, {n} envs (same-step autoreset)", numpy_rate,
+                        "env-steps/s"))
+        for device in devices:
+            for dtype in (torch.float64, torch.float32):
+                t = twin_step_timing("SoftSphere-v0", n, calls, convert=lambda a: torch.as_tensor(a, device=device),
+                                     backend="torch", device=device, dtype=dtype, check_actions=False,
+                                     autoreset_mode="same_step")
+                rate = n / t.median
+                rows.append(Row("torch", f"SoftSphere-v0: torch twin on {device}, {str(dtype)[6:]}, {n} envs", rate,
+                                "env-steps/s", f"{rate / numpy_rate:.2f}x the numpy twin"))
+    if "cuda" not in devices:
+        rows.append(Row("torch", "SoftSphere-v0: torch twin on a GPU", float("nan"), "",
+                        "not measured: no CUDA device in this process", ok=None))
+    return rows
