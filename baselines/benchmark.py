@@ -43,6 +43,8 @@ class Plan:
     oracle: dict[str, Any] = field(default_factory=dict)   # TrajectoryOracle settings (laryngoscope scenes)
 
 
+TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
+AGENTS = (*ALGOS, TORCH_PPO)
 QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 FIVE_SEEDS = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 
@@ -64,6 +66,11 @@ def scene_baselines(plan: Plan, scene: str) -> list[str]:
     return [name for name in plan.baselines if applies(name, kind)]
 
 
+def scene_agents(plan: Plan, scene: str) -> list[str]:
+    """The plan's agents that train on the scene (``ppo-torch``: the ideal-device scenes only)."""
+    return [a for a in plan.agents if a != TORCH_PPO or device_kind(scene) == "ideal"]
+
+
 def check_names(plan: Plan) -> None:
     for name in plan.scenes:
         if name not in SCENES:
@@ -72,8 +79,8 @@ def check_names(plan: Plan) -> None:
         if name not in BASELINES:
             raise ValueError(f"unknown policy {name!r}; valid baselines: {list(BASELINES)}")
     for name in plan.agents:
-        if name not in ALGOS:
-            raise ValueError(f"unknown agent {name!r}; valid agents: {list(ALGOS)}")
+        if name not in AGENTS:
+            raise ValueError(f"unknown agent {name!r}; valid agents: {list(AGENTS)}")
 
 
 def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
@@ -84,12 +91,13 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
         out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes, plan.oracle)))
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
-        for algo in plan.agents:
+        for algo in scene_agents(plan, scene):
+            fn = torch_agent_job if algo == TORCH_PPO else agent_job
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
-                out.append(Job(f"{scene} {algo} seed {seed}", agent_job,
+                out.append(Job(f"{scene} {algo} seed {seed}", fn,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes)))
-    expected = lambda job: 0 if job.fn is agent_job else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
         else 2  # noqa: E731
     return sorted(out, key=expected)
 
@@ -135,6 +143,32 @@ def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None
     return episodes_, curve
 
 
+def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
+                    episodes: int) -> tuple[Episodes, None]:
+    """Train (or load) one ``ppo-torch`` agent (``baselines/ppo_torch.py``) on the GPU when there is one,
+    else on CPU tensors, and evaluate it."""
+    from . import ppo_torch
+
+    _torch_single_thread()
+    path = Path(run_dir) / "ppo-torch.pt"
+    if path.exists():
+        agent = ppo_torch.load(path, scene)
+    else:
+        args = ppo_torch.Args(scene=scene, seed=seed, device=torch_device())
+        if budget is not None:
+            args.total_timesteps = budget
+        agent, _ = ppo_torch.train(args, log=lambda line: None)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        ppo_torch.save(agent, args, path)
+    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
+
+
+def torch_device() -> str:
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
 def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[[str], None] = print,
         write: bool = True, stem: str = "benchmark", executor: str = "local", n_jobs: int = 1,
         retries: int = 1) -> list[dict[str, Any]]:
@@ -142,6 +176,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     reports when ``write``. Results do not depend on the executor or the number of workers."""
     check_names(plan)
     _torch_single_thread()
+    if TORCH_PPO in plan.agents and torch_device() == "cpu":
+        echo(f"{TORCH_PPO}: no GPU in this process; it trains on CPU tensors (the table says so)")
     started = time.perf_counter()
     grid = jobs(plan, runs_dir)
     results = {r.key: r for r in run_jobs(grid, executor, n_jobs, retries, echo)}
@@ -164,7 +200,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             timings[r.key] = r.wall_s
             if r.ok:
                 summaries.append(_with(anchored(r.value).summary(), kind="baseline", seeds=1))
-        for algo in plan.agents:
+        for algo in scene_agents(plan, scene):
             runs = [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])]
             timings[f"{scene} {algo}"] = sum(r.wall_s for r in runs)
             done = [r.value for r in runs if r.ok]
@@ -176,8 +212,13 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
-            budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
-            summaries.append(_with(merged.summary(), kind=f"agent ({budget:,} steps)", seeds=len(done)))
+            if algo == TORCH_PPO:
+                budget = plan.timesteps.get(algo) or _torch_ppo_budget()
+                kind = f"agent ({budget:,} steps, torch on {torch_device()})"
+            else:
+                budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
+                kind = f"agent ({budget:,} steps)"
+            summaries.append(_with(merged.summary(), kind=kind, seeds=len(done)))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
     echo("")
@@ -192,6 +233,12 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))
     return summaries
+
+
+def _torch_ppo_budget() -> int:
+    from .ppo_torch import Args
+
+    return Args.total_timesteps
 
 
 def _oracle_text(plan: Plan) -> str:
@@ -289,7 +336,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
     (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
                                                        "failed_jobs": {r.key: r.error for r in failed}},
                                                       indent=1, default=float))
-    budgets = {a: plan.timesteps.get(a) or {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes}
+    budgets = {a: plan.timesteps.get(a) or (_torch_ppo_budget() if a == TORCH_PPO else
+                                            {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes})
                for a in plan.agents}
     md = ["# Benchmark: baselines and agents on SoftSphere\n",
           f"Made by `{command}` in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "

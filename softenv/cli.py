@@ -214,7 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
     p.add_argument("--scenes", nargs="+", help="benchmark scenes (default: all in full mode)")
     p.add_argument("--policies", nargs="*", help="baseline policies (default: all)")
-    p.add_argument("--agents", nargs="*", help="SB3 agents: ppo sac td3 sac-her (default: quick ppo sac; full all)")
+    p.add_argument("--agents", nargs="*", help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
+                   "present; ideal-device scenes) (default: quick and full: the four SB3 agents)")
     p.add_argument("--episodes", type=int, help="test episodes per policy and scene (default 100)")
     p.add_argument("--out", default="results", help="report directory (default: results)")
     p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")

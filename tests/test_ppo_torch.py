@@ -1,0 +1,70 @@
+"""baselines/ppo_torch.py: a short CPU run learns, is reproducible, and its weights load back safely."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from baselines.evaluate import evaluate, scene_kwargs  # noqa: E402
+from baselines.policies import make_baseline  # noqa: E402
+from baselines.ppo_torch import Args, TorchPolicy, load, save, train  # noqa: E402
+from softenv.envs.config import make_config  # noqa: E402
+from softenv.envs.world import World  # noqa: E402
+
+SHORT = {"total_timesteps": 16 * 64 * 12, "num_steps": 64}
+
+
+@pytest.fixture(scope="module")
+def trained():
+    torch.set_num_threads(1)
+    args = Args(seed=0, **SHORT)
+    agent, run = train(args, log=lambda line: None)
+    return args, agent, run
+
+
+def test_a_short_run_on_cpu_tensors_learns_to_press(trained):
+    """12 updates (12k env steps) already beat the random policy on the test targets, by far."""
+    args, agent, run = trained
+    assert run["env_steps"] == 16 * 64 * 12 and run["steps_per_s"] > 0
+    kwargs = scene_kwargs("SoftSphere-v0")[1]
+    kwargs.pop("obs_mode")
+    random = evaluate(make_baseline("random", World(make_config(**kwargs))), "SoftSphere-v0", episodes=20)
+    ppo = evaluate(TorchPolicy(agent), "SoftSphere-v0", episodes=20)
+    assert ppo.values["error_sum_mm"].mean() < 0.7 * random.values["error_sum_mm"].mean()
+
+
+def test_the_same_seed_trains_the_same_weights(trained):
+    args, agent, _ = trained
+    again, _ = train(Args(seed=0, **SHORT), log=lambda line: None)
+    for (name, a), b in zip(agent.state_dict().items(), again.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+def test_weights_load_back_and_mismatches_are_refused(trained, tmp_path):
+    args, agent, _ = trained
+    path = tmp_path / "ppo-torch-0.pt"
+    save(agent, args, path)
+    obs = np.random.default_rng(0).uniform(-1, 1, (5, agent.norm.mean.shape[0])).astype(np.float32)
+    np.testing.assert_array_equal(TorchPolicy(load(path, "SoftSphere-v0")).predict(obs), TorchPolicy(agent).predict(obs))
+    with pytest.raises(ValueError, match="trained on scene 'SoftSphere-v0', not 'SoftSphereProcedure-v0'"):
+        load(path, "SoftSphereProcedure-v0")
+    data = torch.load(path, weights_only=True)
+    data["format_version"] = 99
+    torch.save(data, path)
+    with pytest.raises(ValueError, match="format_version=99"):
+        load(path, "SoftSphere-v0")
+
+
+def test_compare_runs_ppo_torch_on_the_ideal_scenes_and_says_where(tmp_path):
+    from baselines.benchmark import Plan, run, scene_agents
+
+    plan = Plan(["SoftSphere-v0"], ["zero"], ["ppo-torch"], {"SoftSphere-v0": 1}, {"ppo-torch": 16 * 128 * 2}, episodes=5)
+    lines = []
+    summaries = run(plan, tmp_path, tmp_path / "runs", "softenv compare --test", echo=lines.append)
+    row = next(s for s in summaries if s["policy"] == "ppo-torch")
+    device = "cuda" if torch.cuda.is_available() else "cpu"
+    assert row["kind"] == f"agent (4,096 steps, torch on {device})" and row["episodes"] == 5
+    assert (tmp_path / "runs" / "SoftSphere-v0" / "ppo-torch-0" / "ppo-torch.pt").exists()
+    assert torch.cuda.is_available() or any("no GPU in this process" in line for line in lines)
+    haptic = Plan(["SoftSphereHaptic-v0"], [], ["ppo", "ppo-torch"], {"SoftSphereHaptic-v0": 1})
+    assert scene_agents(haptic, "SoftSphereHaptic-v0") == ["ppo"]          # the torch twin has no laryngoscope
