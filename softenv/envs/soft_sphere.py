@@ -412,9 +412,10 @@ class SoftSphereVectorEnv(VectorEnv):
         success = ratio < w.tolerance
         # commit the stepped envs only (next-step autoreset leaves the others to _start below)
         s = stepped
-        self._z[s], self._b[s], self._prev[s], self._features[s] = z[s], b[s], a[s], f[s]
-        self._agent_cum[s], self._peak[s], self._last_target[s] = agent_cum[s], peak[s], target[s]
-        self._t[s] += 1
+        m = slice(None) if s.all() else s          # every env steps (always in same-step mode): no mask gathers
+        self._z[m], self._b[m], self._prev[m], self._features[m] = z[m], b[m], a[m], f[m]
+        self._agent_cum[m], self._peak[m], self._last_target[m] = agent_cum[m], peak[m], target[m]
+        self._t[m] += 1
         terminated = (success & w.terminate_on_success) & s
         truncated = (self._t >= w.horizon) & s
         info_values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
