@@ -290,6 +290,18 @@ def test_table_scalar_and_vector_lookups_agree_bitwise():
         table.predict([0.01, 0.0, 41.0, 0.0])
 
 
+def test_a_point_a_rounding_error_below_the_table_reads_its_face_not_a_wrapped_row():
+    """A force of -1 in action units can land one ulp below the box; its cell index must not go
+    negative (numpy would wrap it to the table's far end and mix in that row's values)."""
+    values = np.random.default_rng(3).standard_normal((9, 5, 4, 3, 7))
+    values[-1] = 1e18           # the far end, where a wrapped index reads: any weight on it shows
+    table = TabulatedResponse([0.0, -0.02, 0.0, -10.0], [0.09, 0.02, 40.0, 10.0], values)
+    below = np.nextafter(table.low_, -np.inf)
+    at, off = table.lookup(np.stack([table.low_, below]))
+    np.testing.assert_allclose(off, at, rtol=0, atol=1e-9)
+    assert np.array_equal(table.lookup_one(below.tolist()), off)
+
+
 def test_tabulated_exact_response_is_close_to_direct(tmp_path):
     d = paper_dataset(441, n_deformations=4)
     sm = ShapeModel("scree").fit(d.shapes, d.mesh)

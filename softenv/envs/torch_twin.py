@@ -175,7 +175,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def _response(self, x: torch.Tensor) -> torch.Tensor:
         """The response table's multilinear interpolation (as :meth:`TabulatedResponse.lookup`)."""
         t = (x - self._low) * self._inv_step
-        cell = torch.floor(t)
+        cell = torch.clamp(torch.floor(t), min=0.0)
         frac = t - cell
         g = torch.stack([1.0 - frac, frac], dim=-1)                      # (N, d, 2)
         w = g[:, 0, self._bits[:, 0]]

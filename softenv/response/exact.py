@@ -132,7 +132,9 @@ class TabulatedResponse(ResponseModel):
     def lookup(self, x: np.ndarray) -> np.ndarray:
         """Interpolate at ``(N, d)`` points inside the box (not checked)."""
         t = (x - self.low_) * self.inv_step_
-        cell = np.floor(t)
+        # a point a rounding error below the box (a force of -1 in action units) stays in the first cell:
+        # its fraction is then a hair below 0, a linear extrapolation of 1e-16 (a negative index would wrap)
+        cell = np.maximum(np.floor(t), 0.0)
         frac = t - cell
         g = np.stack([1.0 - frac, frac], axis=-1)                  # (N, d, 2)
         w = g[:, 0, self._bits[:, 0]]
@@ -152,7 +154,7 @@ class TabulatedResponse(ResponseModel):
         weights = [1.0]
         for j, (xj, lo, inv, stride) in enumerate(zip(x, self._low_list, self._inv_list, self._stride_list)):
             t = (xj - lo) * inv
-            cell = math.floor(t)
+            cell = max(math.floor(t), 0)
             frac = t - cell
             base += cell * stride
             pair = (1.0 - frac, frac)
