@@ -321,20 +321,7 @@ class SoftSphereVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed has {len(seeds)} entries; num_envs={self.num_envs}")
-        # check everything before the generators change; a None seed continues that env's generator, as
-        # SyncVectorEnv's reset(seed=None) does
-        rngs = [rng if s is None else gym.utils.seeding.np_random(s)[0] for rng, s in zip(self._rngs, seeds)]
-        target = _target_option(self.world, options)
-        self._rngs = rngs
-        self._episode = self.world.start_episodes(self._rngs, [target] * self.num_envs)
+        self._rngs, self._episode = seeded_episodes(self.world, self._rngs, seed, options)
         self._start(np.ones(self.num_envs, dtype=bool))
         self._autoreset[:] = False
         return self._observe(self._b, self._upcoming_target(), self._device_obs(), self._prev), {}
@@ -542,6 +529,25 @@ def _autoreset_mode(value: str | AutoresetMode) -> AutoresetMode:
         raise ValueError(f"autoreset_mode={value!r} is not supported; use 'next_step' or 'same_step' "
                          "(or gymnasium.vector.AutoresetMode.NEXT_STEP / SAME_STEP)")
     return mode
+
+
+def seeded_episodes(world: World, rngs: list[np.random.Generator], seed: int | list[int | None] | None,
+                    options: dict[str, Any] | None) -> tuple[list[np.random.Generator], Any]:
+    """A batched reset's generators and episodes: ``seed=s`` seeds env ``i`` with ``s + i``, a list seeds
+    each env, ``None`` continues each env's generator (as SyncVectorEnv's reset does). Everything is
+    checked before a generator changes."""
+    n = len(rngs)
+    if seed is None:
+        seeds: list[int | None] = [None] * n
+    elif isinstance(seed, (int, np.integer)):
+        seeds = [int(seed) + i for i in range(n)]
+    else:
+        seeds = list(seed)
+        if len(seeds) != n:
+            raise ValueError(f"seed has {len(seeds)} entries; num_envs={n}")
+    fresh = [rng if s is None else gym.utils.seeding.np_random(s)[0] for rng, s in zip(rngs, seeds)]
+    target = _target_option(world, options)
+    return fresh, world.start_episodes(fresh, [target] * n)
 
 
 def _target_option(world: World, options: dict[str, Any] | None) -> np.ndarray | None:

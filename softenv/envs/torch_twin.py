@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -114,20 +113,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        from .soft_sphere import _target_option
+        from .soft_sphere import seeded_episodes
 
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed has {len(seeds)} entries; num_envs={self.num_envs}")
-        rngs = [rng if s is None else gym.utils.seeding.np_random(s)[0] for rng, s in zip(self._rngs, seeds)]
-        target = _target_option(self.world, options)
-        self._rngs = rngs
-        episodes = self.world.start_episodes(self._rngs, [target] * self.num_envs)
+        self._rngs, episodes = seeded_episodes(self.world, self._rngs, seed, options)
         self._episode = {name: self._tensor(getattr(episodes, name), self._dtype_of(name))
                          for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
         everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
