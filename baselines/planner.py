@@ -125,6 +125,7 @@ class TrajectoryOracle(ReplayPolicy):
         rng = np.random.default_rng(self.seed)
         mean = np.zeros((n, len(knots), 4))
         best = mean.copy()
+        best_actions = base.astype(np.float32)
         spread = np.full_like(mean, self.sigma)
         seeds = [seed + i for i in range(n) for _ in range(self.candidates)]
         self.history = [float(best_error.mean())]
@@ -138,12 +139,13 @@ class TrajectoryOracle(ReplayPolicy):
             order = np.argsort(error, axis=1, kind="stable")
             improved = error[np.arange(n), order[:, 0]] < best_error
             best[improved] = trial[improved, order[improved, 0]]
+            best_actions[improved] = replay.actions.reshape(n, self.candidates, horizon, 4)[improved, order[improved, 0]]
             best_error = np.where(improved, error[np.arange(n), order[:, 0]], best_error)
             elite = np.take_along_axis(trial, order[:, :self.elites, None, None], axis=1)
             mean = elite.mean(axis=1)
             spread = np.maximum(elite.std(axis=1), 0.02 * self.sigma)
             self.history.append(float(best_error.mean()))
-        self.actions = np.clip(base + np.einsum("tm,nmc->ntc", weights, best), -1.0, 1.0).astype(np.float32)
+        self.actions = best_actions                  # the very actions whose rollouts scored best_error
         self.decision_us = (time.perf_counter() - started) / (n * horizon) * 1e6
         return best_error
 
