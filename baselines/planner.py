@@ -67,7 +67,6 @@ class RecordingPolicy:
         self.policy = policy
         self.name = policy.name
         self.actions: list[np.ndarray] = []
-        self.recording = True
 
     def reset(self) -> None:
         self.policy.reset()
@@ -75,7 +74,7 @@ class RecordingPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         action = self.policy.predict(obs)
-        if self.recording and np.ndim(action) == 2:
+        if np.ndim(action) == 2:                  # batch calls only (not the single-row latency probe)
             self.actions.append(np.array(action, dtype=np.float32))
         return action
 

@@ -43,7 +43,7 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     assert oracle.history[0] == pytest.approx(warm.mean()) and np.all(np.diff(oracle.history) <= 1e-9)
     measured = evaluate(oracle, SCENE, episodes=3)
     np.testing.assert_allclose(measured.values["error_sum_mm"], planned, rtol=1e-9)
-    assert measured.decision_us == oracle.decision_us > 0
+    assert measured.decision_us == oracle.decision_us > 0       # the planner's own figure is carried, not re-timed
     again = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
     again.plan(expert, episodes=3)
     np.testing.assert_array_equal(again.actions, oracle.actions)

@@ -30,7 +30,18 @@ from gymnasium.vector.utils import batch_space
 
 from ..response import TabulatedResponse
 from .config import scene_config
+from .parts import reward_terms
 from .world import World
+
+
+class TorchOps:
+    """The elementwise operations :func:`~softenv.envs.parts.reward_terms` needs, on tensors."""
+
+    sqrt = staticmethod(torch.sqrt)
+
+    @staticmethod
+    def positive(x: torch.Tensor) -> torch.Tensor:
+        return torch.clamp(x, min=0.0)
 
 
 class SoftSphereTorchVectorEnv(VectorEnv):
@@ -192,13 +203,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         sq = torch.sum(d * d, dim=-1)
         c = a - self._prev
         change = torch.sum(c * c, dim=-1)
-        weights = w.weights
-        ratio = torch.sqrt(sq / ep["sq_ref"][self._rows, ti])
-        force = torch.sqrt(f[:, 2] * f[:, 2] + f[:, 3] * f[:, 3])
-        shape = -weights["shape_weight"] * ratio
-        force_term = -weights["force_weight"] * (torch.clamp(force - weights["safe_force"], min=0.0)
-                                                 / weights["safe_force"])
-        smooth = -weights["smoothness_weight"] * (change / 4.0)
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, ep["sq_ref"][self._rows, ti], f[:, 2], f[:, 3],
+                                                                       change, w.weights, TorchOps)
         agent_cum = self._agent_cum + ratio.to(torch.float64)
         peak = torch.maximum(self._peak, force)
         hi = torch.clamp(self._t, max=H - 1)
@@ -220,7 +226,6 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                   "shape_error_mm": torch.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                   "is_success": success, "normalized_score": score}
-        reward = shape + force_term + smooth
         if w.obs_mode == "dict":
             obs = self._observe(self._b, self._last_target, self._features, self._prev)
             shape = self._goal_shape_term(obs["achieved_goal"], obs["desired_goal"])
