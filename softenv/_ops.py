@@ -74,3 +74,8 @@ class ArrayOps:
     @staticmethod
     def take(values: np.ndarray, i: np.ndarray) -> np.ndarray:
         return values[i]
+
+    @staticmethod
+    def stack(columns: list[np.ndarray]) -> np.ndarray:
+        """Columns of equal shape stacked on a new last axis."""
+        return np.stack(columns, axis=-1)

@@ -109,7 +109,7 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
-    bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv))
+    bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv), device=args.device)
 
 
 def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
@@ -208,6 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")
     p.add_argument("--out", default="results", help="output directory (default: results)")
     p.add_argument("--only", nargs="+", help="run only these sections")
+    p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
+                   help="cuda: the torch twin on the GPU alone, written to perf-gpu.md (needs a CUDA device)")
 
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
     p.add_argument("--quick", action="store_true",

@@ -130,6 +130,145 @@ def test_bench_reports_the_torch_twin_beside_the_numpy_twin(tmp_path):
     names = [r.metric for r in rows]
     assert any("numpy twin, 1024 envs" in name for name in names)
     torch_rows = [r for r in rows if "torch twin on cpu" in r.metric]
-    assert len(torch_rows) == 2 and all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows)
-    gpu = [r for r in rows if "GPU" in r.metric or "on cuda" in r.metric]
+    assert [r.metric.split(", ")[1:3] for r in torch_rows] == [["float64", "host draw"], ["float32", "host draw"],
+                                                              ["float32", "device draw"]]
+    assert all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows)
+    gpu = [r for r in rows if "GPU" in r.metric]
     assert gpu and (torch.cuda.is_available() or "not measured" in gpu[0].spread)
+
+
+def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
+    from softenv import bench
+
+    run = lambda: bench.run(True, tmp_path, command="softenv bench --quick --device cuda", echo=lambda s: None,  # noqa: E731
+                            device="cuda")
+    if not torch.cuda.is_available():
+        with pytest.raises(RuntimeError, match="--device cuda: no CUDA device"):
+            run()
+        return
+    rows = run()
+    assert (tmp_path / "perf-gpu_quick.md").exists()
+    assert any(r.metric.startswith("host synchronisations") and r.ok for r in rows)
+    assert sum("torch twin on" in r.metric for r in rows) == 4
+
+
+# -- target_draw="device": episodes drawn and scored on the device -------------------------------
+
+
+def _splitmix64(seed, n):
+    """The n-th output of splitmix64 from ``seed``, in Python integers (an independent implementation)."""
+    mask = (1 << 64) - 1
+    z = (seed + n * 0x9E3779B97F4A7C15) & mask
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+    return z ^ (z >> 31)
+
+
+def test_the_device_generator_is_splitmix64():
+    from softenv.envs.torch_parts import as_int64, episode_uniforms
+
+    seeds = [0, 1, 12345, 2**63 - 1, 2**64 - 7]
+    episodes = [0, 3, 2**40]
+    seed = torch.tensor([as_int64(s) for s in seeds for _ in episodes])
+    episode = torch.tensor([e for _ in seeds for e in episodes])
+    got = episode_uniforms(seed, episode, 5).numpy()
+    want = [[(_splitmix64(s, 8 * e + j) >> 11) / 2.0**53 for j in range(1, 6)] for s in seeds for e in episodes]
+    assert np.array_equal(got, np.array(want))
+
+
+@pytest.mark.parametrize("env_id", ["SoftSphere-v0", "SoftSphereViscoelastic-v0", "SoftSphereProcedure-v0"])
+def test_a_device_drawn_episode_scores_as_the_numpy_env_given_its_target(env_id):
+    """The on-device references (target shape by lookup, zero and oracle error sums, the oracle's creep)
+    against the numpy twin's precomputed episode of the same target, over a whole episode."""
+    n = 3
+    env = _make(env_id, "torch", num_envs=n, target_draw="device", check_actions=False)
+    obs, _ = env.reset(seed=11)
+    world = env.unwrapped.world
+    targets = (env.unwrapped._episodes.features.numpy() - world.device.mid) / world.device.half
+    actions = np.random.default_rng(2).uniform(-1, 1, (world.horizon, n, 4))
+    mine = [env.step(torch.as_tensor(a)) for a in actions]
+    for i in range(n):
+        ref = _make(env_id, "numpy", num_envs=1)
+        o, _ = ref.reset(options={"target": targets[i]})
+        _close(o[0], obs[i], rtol=1e-6, atol=1e-7)
+        for a, (o_t, r_t, te_t, tr_t, info_t) in zip(actions, mine):
+            o, r, te, tr, info = ref.step(a[i:i + 1])
+            _close(r[0], r_t[i], rtol=1e-12, atol=1e-12)
+            for key in ("normalized_score", "shape_error_mm", "reward_shape", "is_success"):
+                _close(info[key][0], info_t[key][i], rtol=1e-12, atol=1e-12)
+            assert (te[0], tr[0]) == (bool(te_t[i]), bool(tr_t[i]))
+            if not tr[0]:
+                _close(o[0], o_t[i], rtol=1e-6, atol=1e-7)
+    assert bool(tr_t.all())
+
+
+def test_device_targets_cover_the_split_are_reproducible_and_move_on_at_autoreset():
+    n = 3000
+    env = _make("SoftSphere-v0", "torch", num_envs=n, target_draw="device", max_episode_steps=2, check_actions=False)
+    env.reset(seed=0)
+    source, family = env.unwrapped._episodes, env.unwrapped.world.family
+    first = source.features.numpy().copy()
+    cells = family.cell_of(first)
+    assert (cells.sum(axis=1) % 2 == 0).all()                     # all in the train split's checkerboard
+    counts = np.unique(cells, axis=0, return_counts=True)[1]
+    assert len(counts) == len(family.cells) and counts.min() > 0.5 * n / len(counts)
+    # env i's episodes depend on its seed and episode number only, not on num_envs or the other envs
+    small = _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device")
+    small.reset(seed=[7, 1])
+    assert np.array_equal(small.unwrapped._episodes.features.numpy(), first[[7, 1]])
+    zero = torch.zeros((n, 4), dtype=torch.float64)
+    env.step(zero)
+    env.step(zero)                                                # episodes end (truncated at 2 steps)
+    assert np.array_equal(source.features.numpy(), first)        # next-step autoreset: not yet
+    env.step(zero)
+    second = source.features.numpy().copy()
+    assert not np.isclose(second, first).all(axis=1).any()
+    env.reset()                                                  # no seed: every env's next episode
+    third = source.features.numpy()
+    assert not np.isclose(third, second).all(axis=1).any()
+    with pytest.raises(ValueError, match=r"seed=-1 must be an int >= 0"):
+        env.reset(seed=[-1] + [0] * (n - 1))
+    with pytest.raises(ValueError, match="target_draw='gpu' must be 'host' or 'device'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, target_draw="gpu")
+
+
+FORBIDDEN = {"item", "tolist", "nonzero", "__bool__", "numpy", "cpu"}   # host reads and dynamic shapes
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
+    """torch.compile(fullgraph=True) captures the whole step (no Python branch on a tensor's value, no
+    data-dependent shape), the graph reads nothing back to the host, and it replays the eager env. The
+    host draw's step does break the graph (at its restart): the check can fail."""
+    graphs = []
+
+    def recorder(gm, example_inputs):
+        graphs.append(gm)
+        return gm.forward
+
+    def made(draw):
+        env = _make("SoftSphereProcedure-v0", "torch", num_envs=4, target_draw=draw, check_actions=False,
+                    autoreset_mode=mode, max_episode_steps=3, dynamics={"kind": "viscoelastic"})
+        env.reset(seed=0)
+        return env
+
+    torch._dynamo.reset()
+    compiled, eager = made("device"), made("device")
+    step = torch.compile(compiled.unwrapped.step, backend=recorder, fullgraph=True)
+    actions = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (8, 4, 4)))
+    for a in actions:                                       # 8 steps: two autoresets of every env
+        got, want = step(a), eager.step(a)
+        assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1])
+        assert torch.equal(got[4]["normalized_score"], want[4]["normalized_score"])
+    assert len(graphs) == 1
+    for node in graphs[0].graph.nodes:
+        name = node.target if isinstance(node.target, str) else getattr(node.target, "__name__", "")
+        assert name not in FORBIDDEN, node.format_node()
+        value = node.meta.get("example_value")
+        if isinstance(value, torch.Tensor):
+            assert all(isinstance(d, int) for d in value.shape), node.format_node()
+    torch._dynamo.reset()
+    host = made("host")
+    with pytest.raises(Exception, match="data-dependent"):
+        torch.compile(host.unwrapped.step, backend=recorder, fullgraph=True)(actions[0])
+    torch._dynamo.reset()

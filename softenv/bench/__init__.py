@@ -25,7 +25,9 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "sb3": ("softenv.bench.env", "bench_sb3"),
     "torch": ("softenv.bench.env", "bench_torch"),
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
+    "gpu": ("softenv.bench.env", "bench_gpu"),          # only with --device cuda
 }
+DEFAULT_SECTIONS = [name for name in SECTIONS if name != "gpu"]
 
 
 
@@ -41,9 +43,14 @@ def threads_pinned() -> bool:
 
 
 def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str = "softenv bench",
-        echo: Callable[[str], None] = print) -> list[Row]:
-    """Run the selected sections (all by default), print the table, write the reports."""
-    names = only or list(SECTIONS)
+        echo: Callable[[str], None] = print, device: str = "cpu") -> list[Row]:
+    """Run the selected sections (all but ``gpu`` by default), print the table, write the reports
+    (``perf.*``; ``device="cuda"`` runs the ``gpu`` section alone and writes ``perf-gpu.*``)."""
+    if device not in ("cpu", "cuda"):
+        raise ValueError(f"device={device!r} must be 'cpu' or 'cuda'")
+    if device == "cuda" and only:
+        raise ValueError("--device cuda runs the gpu section alone; drop --only")
+    names = ["gpu"] if device == "cuda" else (only or DEFAULT_SECTIONS)
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
         raise ValueError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")
@@ -66,7 +73,7 @@ def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str 
     advice = blas_advice()
     if advice:
         echo(f"warning: {advice}")
-    write_report(rows, out_dir, command, quick, elapsed, table, advice)
+    write_report(rows, out_dir, command, quick, elapsed, table, advice, "perf-gpu" if device == "cuda" else "perf")
     return rows
 
 
@@ -80,10 +87,10 @@ def format_table(rows: list[Row]) -> str:
 
 
 def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elapsed: float, table: str,
-                 advice: str | None = None) -> None:
+                 advice: str | None = None, name: str = "perf") -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     machine = machine_info()
-    stem = "perf_quick" if quick else "perf"
+    stem = f"{name}_quick" if quick else name
     payload = {"command": command, "quick": quick, "elapsed_s": elapsed, "machine": machine,
                "blas_advice": advice, "rows": [r.as_dict() for r in rows]}
     (out_dir / f"{stem}.json").write_text(json.dumps(payload, indent=2, default=float) + "\n")

@@ -183,29 +183,107 @@ def _render_rows(quick: bool) -> list[Row]:
 
 
 def bench_torch(quick: bool, reference: Timing) -> list[Row]:
-    """The torch twin (``backend="torch"``, same-step autoreset, no action check) beside the numpy
-    twin: on CPU tensors always, on CUDA when a GPU is present (else a row saying it was not measured)."""
-    try:
-        import torch
-    except ImportError as exc:
-        return [Row("torch", f"torch backend: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
+    """The torch twin (``backend="torch"``, same-step autoreset, no action check) on CPU tensors beside
+    the numpy twin: both target draws, and the device draw under ``torch.compile`` (full mode). GPU
+    figures come from ``softenv bench --device cuda`` (section ``gpu``); here a row says whether one
+    was present."""
+    torch = _torch_or_none()
+    if torch is None:
+        return [Row("torch", "torch backend: skipped (torch is not installed)", float("nan"), "",
+                    target="install softenv[rl]", ok=None)]
     torch.set_num_threads(1)
     calls = 10 if quick else 40
-    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
     rows = []
     for n in (1024,) if quick else (1024, 16384):
         numpy_rate = n / twin_step_timing("SoftSphere-v0", n, calls, autoreset_mode="same_step").median
         rows.append(Row("torch", f"SoftSphere-v0: numpy twin, {n} envs (same-step autoreset)", numpy_rate,
                         "env-steps/s"))
-        for device in devices:
-            for dtype in (torch.float64, torch.float32):
-                t = twin_step_timing("SoftSphere-v0", n, calls, convert=lambda a: torch.as_tensor(a, device=device),
-                                     backend="torch", device=device, dtype=dtype, check_actions=False,
-                                     autoreset_mode="same_step")
-                rate = n / t.median
-                rows.append(Row("torch", f"SoftSphere-v0: torch twin on {device}, {str(dtype)[6:]}, {n} envs", rate,
-                                "env-steps/s", f"{rate / numpy_rate:.2f}x the numpy twin"))
-    if "cuda" not in devices:
+        cases = [(torch.float64, "host", False), (torch.float32, "host", False), (torch.float32, "device", False)]
+        cases += [] if quick else [(torch.float32, "device", True)]
+        for dtype, draw, compiled in cases:
+            rate = n / torch_step_timing(n, "cpu", dtype, draw, compiled, calls).median
+            rows.append(Row("torch", f"SoftSphere-v0: torch twin on cpu, {str(dtype)[6:]}, {draw} draw"
+                            f"{', torch.compile' if compiled else ''}, {n} envs", rate, "env-steps/s",
+                            f"{rate / numpy_rate:.2f}x the numpy twin"))
+    if not torch.cuda.is_available():
         rows.append(Row("torch", "SoftSphere-v0: torch twin on a GPU", float("nan"), "",
                         "not measured: no CUDA device in this process", ok=None))
     return rows
+
+
+def bench_gpu(quick: bool, reference: Timing) -> list[Row]:
+    """``softenv bench --device cuda``: the torch twin on the GPU (float32, device draw, same-step
+    autoreset, no action check), eager and under ``torch.compile``, with the issue's targets, the
+    numpy twin on one CPU core beside it, and a check that a step never synchronises with the host."""
+    torch = _torch_or_none()
+    if torch is None or not torch.cuda.is_available():
+        raise RuntimeError("--device cuda: no CUDA device in this process (torch.cuda.is_available() is False)")
+    gpu = torch.cuda.get_device_name()
+    calls = 20 if quick else 100
+    numpy_rate = 1024 / twin_step_timing("SoftSphere-v0", 1024, calls, autoreset_mode="same_step").median
+    rows = [Row("gpu", "SoftSphere-v0: numpy twin on one CPU core, 1024 envs", numpy_rate, "env-steps/s")]
+    env = _torch_twin(1024, "cuda", torch.float32, "device")
+    action = torch.zeros((1024, 4), device="cuda")
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")          # any host synchronisation inside step raises
+    try:
+        env.step(action)
+        synced = ""
+    except RuntimeError as exc:
+        synced = str(exc).splitlines()[0]
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
+    rows.append(Row("gpu", f"host synchronisations inside one step ({gpu})", float(bool(synced)), "",
+                    synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
+    for n in (1024, 262_144) if quick else (1024, 262_144, 1_048_576):
+        target = 10e6 if n == 1024 else 500e6
+        for compiled in (False, True):
+            rate = n / torch_step_timing(n, "cuda", torch.float32, "device", compiled, calls).median
+            rows.append(Row("gpu", f"SoftSphere-v0: torch twin on {gpu}, float32, device draw"
+                            f"{', torch.compile' if compiled else ''}, {n:,} envs", rate, "env-steps/s",
+                            f"{rate / numpy_rate:.0f}x the numpy twin", f">= {target / 1e6:.0f}M", rate >= target))
+    return rows
+
+
+def torch_step_timing(n: int, device: str, dtype: Any, draw: str, compiled: bool, calls: int) -> Timing:
+    """Seconds per step of the torch twin of SoftSphere-v0 (5 repeats of ``calls`` steps, the device
+    synchronised around each; ``compiled``: the step under ``torch.compile(fullgraph=True)``, warmed up)."""
+    import torch
+
+    env = _torch_twin(n, device, dtype, draw)
+    generator = torch.Generator(device=device).manual_seed(0)
+    actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
+    step = torch.compile(env.step, fullgraph=True) if compiled else env.step
+    for a in actions[:3]:
+        step(a)
+    samples = []
+    for _ in range(5):
+        _synchronize(device)
+        t0 = time.perf_counter()
+        for i in range(calls):
+            step(actions[i % len(actions)])
+        _synchronize(device)
+        samples.append((time.perf_counter() - t0) / calls)
+    return Timing(np.array(samples))
+
+
+def _torch_twin(n: int, device: str, dtype: Any, draw: str) -> Any:
+    env = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
+                       device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step")
+    env.reset(seed=0)
+    return env
+
+
+def _synchronize(device: str) -> None:
+    if device == "cuda":
+        import torch
+
+        torch.cuda.synchronize()
+
+
+def _torch_or_none() -> Any:
+    try:
+        import torch
+    except ImportError:
+        return None
+    return torch

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from .._ops import ArrayOps
+
 
 class Dynamics:
     """Shape parameters relax toward the equilibrium ``g`` of the applied force.
@@ -82,18 +84,21 @@ def target_schedule(kind: str, target: np.ndarray, start_insertion: float, horiz
     ``reach``: the target force throughout. ``procedure``: the laryngoscopy sequence in three equal
     phases -- *insert* (the blade slides from the front of the range to the target depth with a light
     touch of 10 % of the target's pressing force), *press* (the pressing force rises to the target's),
-    *sweep* (the sideways force rises to the target's).
+    *sweep* (the sideways force rises to the target's); see :func:`procedure_features`.
     """
     if kind == "reach":
         return np.tile(target, (horizon, 1))
     t = (np.arange(horizon) + 1) / horizon
-    phase = np.clip(3.0 * t[:, None] - np.arange(3)[None, :], 0.0, 1.0)    # progress in each phase
-    out = np.empty((horizon, 4))
-    out[:, 0] = start_insertion + (target[0] - start_insertion) * phase[:, 0]
-    out[:, 1] = target[1] * phase[:, 0]
-    out[:, 2] = target[2] * (0.1 + 0.9 * phase[:, 1])
-    out[:, 3] = target[3] * phase[:, 2]
-    return out
+    return procedure_features(target[None, :], t, start_insertion, ArrayOps)
+
+
+def procedure_features(target: Any, t: Any, start_insertion: float, ops: Any) -> Any:
+    """The procedure's target features at episode fraction ``t = (step + 1) / horizon``: targets
+    ``(..., 4)``, fractions ``(...)`` (numpy arrays with :class:`~softenv._ops.ArrayOps`, tensors with
+    the torch twin's ops: the same operations, so the same values)."""
+    insert, press, sweep = (ops.clip(3.0 * t - j, 0.0, 1.0) for j in range(3))    # progress in each phase
+    return ops.stack([start_insertion + (target[..., 0] - start_insertion) * insert, target[..., 1] * insert,
+                      target[..., 2] * (0.1 + 0.9 * press), target[..., 3] * sweep])
 
 
 def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,

@@ -14,9 +14,14 @@ What it expresses: the tabulated response (``response.model = "exact"``, analyti
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
 dict. Not: the laryngoscope (pymunk has no tensors), regressor responses and vertex observations.
 
-Host work stays at episode starts: a reset draws targets on the host and copies them in. Inside
-``step`` the only host synchronisations are the action check (``check_actions=False`` skips it) and
-the autoreset of finished envs (one ``nonzero`` per step, and the target draw when an episode ends).
+Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
+numpy generators and precomputes each episode on the host, so it plays the numpy twin's episodes;
+starting an episode mid-run reads which envs ended (one host synchronisation per step).
+``"device"`` draws and scores episodes on the device (:mod:`softenv.envs.torch_parts`): with
+``check_actions=False`` a step then never synchronises with the host and keeps every shape static,
+so ``torch.compile(fullgraph=True)`` and CUDA graphs can capture it (tested). Its targets come from
+another generator, so its episodes differ from the numpy twin's; given the same target, the two
+agree to rounding (tested).
 """
 
 from __future__ import annotations
@@ -31,17 +36,8 @@ from gymnasium.vector.utils import batch_space
 from ..response import TabulatedResponse
 from .config import scene_config
 from .parts import reward_terms
+from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, _dtype_of
 from .world import World
-
-
-class TorchOps:
-    """The elementwise operations :func:`~softenv.envs.parts.reward_terms` needs, on tensors."""
-
-    sqrt = staticmethod(torch.sqrt)
-
-    @staticmethod
-    def positive(x: torch.Tensor) -> torch.Tensor:
-        return torch.clamp(x, min=0.0)
 
 
 class SoftSphereTorchVectorEnv(VectorEnv):
@@ -51,6 +47,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...).
         dtype: ``torch.float64`` (default) or ``torch.float32`` for the state and rewards.
         check_actions: check each step's actions (shape, finite, within [-1, 1]): one host sync.
+        target_draw: ``"host"`` (the numpy twin's episodes) or ``"device"`` (no host sync; see above).
         Others as :class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`.
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
@@ -63,7 +60,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  base_scene: dict[str, Any] | None = None, device: str | torch.device = "cpu",
-                 dtype: torch.dtype = torch.float64, check_actions: bool = True, **scene: Any) -> None:
+                 dtype: torch.dtype = torch.float64, check_actions: bool = True, target_draw: str = "host",
+                 **scene: Any) -> None:
         from .soft_sphere import _autoreset_mode
 
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -72,6 +70,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             raise ValueError(f"render_mode={render_mode!r}: the torch backend does not render; use backend='numpy'")
         if dtype not in (torch.float64, torch.float32):
             raise ValueError(f"dtype={dtype!r} must be torch.float64 or torch.float32")
+        if target_draw not in ("host", "device"):
+            raise ValueError(f"target_draw={target_draw!r} must be 'host' or 'device'")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
         if max_episode_steps is not None:
@@ -103,39 +103,32 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._rest_action = t(dev.rest_action.astype(np.float64))
         self._rest_features = t(world.scene.rest_features)
         n, k = self.num_envs, world.k
-        self._rows = torch.arange(n, device=self.device)
-        self._rngs = [np.random.default_rng() for _ in range(n)]
+        self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
+                          else DeviceEpisodes(world, n, t, self._response))
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
         self._features, self._prev = t(np.empty((n, 4))), t(np.empty((n, 4)))
         self._t = torch.zeros(n, dtype=torch.int64, device=self.device)
-        self._agent_cum, self._peak = t(np.zeros(n), self._dtype_of("agent_cum")), t(np.zeros(n))
+        self._agent_cum, self._peak = t(np.zeros(n), _dtype_of("agent_cum", dtype)), t(np.zeros(n))
         self._last_target = t(np.empty((n, k)))
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
-        self._episode: dict[str, torch.Tensor] | None = None
+        self._started = False
 
     def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device).to(dtype or self.dtype)
-
-    def _dtype_of(self, name: str) -> torch.dtype:
-        # the score's running sums stay float64 in either dtype: a float32 sum over an episode drifts by 1e-5
-        return torch.float64 if name in ("zero_cum", "oracle_cum", "agent_cum") else self.dtype
 
     # -- gymnasium API --------------------------------------------------------------------------
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        from .soft_sphere import seeded_episodes
-
-        self._rngs, episodes = seeded_episodes(self.world, self._rngs, seed, options)
-        self._episode = {name: self._tensor(getattr(episodes, name), self._dtype_of(name))
-                         for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
+        self._episodes.reset(seed, options)
+        self._started = True
         everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
         self._start(everyone)
         self._autoreset[:] = False
-        return self._observe(self._b, self._upcoming_target(), self._features, self._prev), {}
+        return self._observe(self._b, self._episodes.first(), self._features, self._prev), {}
 
     def step(self, actions: Any) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
-        if self._episode is None:
+        if not self._started:
             raise RuntimeError("call reset() before step()")
         a = self._checked(actions)
         infos: dict[str, Any] = {}
@@ -187,9 +180,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def _advance(self, a: torch.Tensor, stepped: torch.Tensor) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor,
                                                                          dict[str, torch.Tensor]]:
         """The numpy twin's ``_advance`` (the stepped envs commit their state) on tensors."""
-        w, ep = self.world, self._episode
-        T, H = ep["sq_ref"].shape[1], w.horizon
-        ti = torch.clamp(self._t, max=T - 1)
+        w, H = self.world, self.world.horizon
+        target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
         f = self._mid + a * self._half
         g = self._response(f)
         dyn = w.dynamics
@@ -198,17 +190,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             b = dyn.r * g + dyn.one_minus_r * z
         else:
             z, b = self._z, g
-        target = ep["target_b"][self._rows, ti]
         d = b - target
         sq = torch.sum(d * d, dim=-1)
         c = a - self._prev
         change = torch.sum(c * c, dim=-1)
-        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, ep["sq_ref"][self._rows, ti], f[:, 2], f[:, 3],
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, f[:, 2], f[:, 3],
                                                                        change, w.weights, TorchOps)
         agent_cum = self._agent_cum + ratio.to(torch.float64)
         peak = torch.maximum(self._peak, force)
-        hi = torch.clamp(self._t, max=H - 1)
-        zero, oracle = ep["zero_cum"][self._rows, hi], ep["oracle_cum"][self._rows, hi]
         score = 100.0 * (zero - agent_cum) / torch.clamp(zero - oracle, min=1e-12)
         success = ratio < w.tolerance
         s = stepped
@@ -226,13 +215,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                   "shape_error_mm": torch.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                   "is_success": success, "normalized_score": score}
+        upcoming = self._episodes.upcoming(self._t)      # (the device source moves its target here)
         if w.obs_mode == "dict":
             obs = self._observe(self._b, self._last_target, self._features, self._prev)
             shape = self._goal_shape_term(obs["achieved_goal"], obs["desired_goal"])
             reward = shape + (force_term + smooth)
             values["reward_shape"] = shape
         else:
-            obs = self._observe(self._b, self._upcoming_target(), self._features, self._prev)
+            obs = self._observe(self._b, upcoming, self._features, self._prev)
         return obs, torch.where(s, reward, torch.zeros_like(reward)), terminated, truncated, values
 
     def _goal_shape_term(self, achieved: torch.Tensor, desired: torch.Tensor) -> torch.Tensor:
@@ -253,11 +243,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                     "desired_goal": obs[:, k:2 * k].clone()}
         return obs
 
-    def _upcoming_target(self) -> torch.Tensor:
-        T = self._episode["sq_ref"].shape[1]
-        return self._episode["target_b"][self._rows, torch.clamp(self._t, max=T - 1)]
-
-    # -- episode starts (host: the targets come from the per-env numpy generators) ---------------
+    # -- episode starts (the targets come from self._episodes) ----------------------------------
 
     def _start(self, mask: torch.Tensor) -> None:
         rows = mask[:, None]
@@ -268,19 +254,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._t = torch.where(mask, torch.zeros_like(self._t), self._t)
         self._agent_cum = torch.where(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
         self._peak = torch.where(mask, torch.zeros_like(self._peak), self._peak)
-        self._last_target = torch.where(rows, self._episode["target_b"][:, 0], self._last_target)
+        self._last_target = torch.where(rows, self._episodes.first(), self._last_target)
 
     def _restart_rows(self, obs: Any, mask: torch.Tensor) -> Any:
         """Draw new episodes for the masked envs, reset their state and write their first observations."""
-        idx = mask.nonzero()[:, 0].tolist()
-        if not idx:
+        if not self._episodes.restart(mask):
             return obs
-        new = self.world.start_episodes([self._rngs[i] for i in idx])
-        rows = torch.as_tensor(idx, device=self.device)
-        for name, value in self._episode.items():
-            value[rows] = self._tensor(getattr(new, name), value.dtype)
         self._start(mask)
-        fresh = self._observe(self._b, self._episode["target_b"][:, 0], self._features, self._prev)
+        fresh = self._observe(self._b, self._episodes.first(), self._features, self._prev)
         if isinstance(obs, dict):
             return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
         return torch.where(mask[:, None], fresh, obs)

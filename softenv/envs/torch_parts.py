@@ -1,0 +1,241 @@
+"""The torch twin's parts: elementwise ops on tensors, and where its episodes come from.
+
+An episode is a target force (four features); the step scores the agent against that target's
+shape and against the score's two anchors (the zero-force and the oracle error sums). Two sources:
+
+* :class:`HostEpisodes` (``target_draw="host"``): the per-env numpy generators draw the targets, and
+  :meth:`~softenv.envs.world.World.start_episodes` precomputes every episode on the host, exactly as
+  the numpy twin does, so both twins play the same episodes. Starting episodes mid-run reads which
+  envs ended: one host synchronisation per step.
+* :class:`DeviceEpisodes` (``target_draw="device"``): the targets are drawn on the device from a
+  counter-based generator (splitmix64 of the env's seed and episode number: the same numbers on any
+  device and for any ``num_envs``), and the references are computed step by step alongside the
+  agent (the target's shape by the response table, the anchors as running sums, the oracle's creep
+  as a second state). Nothing is read back to the host and every shape is static, so a step can be
+  captured whole by ``torch.compile`` or a CUDA graph.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+import torch
+
+from .parts import procedure_features
+from .world import World
+
+Lookup = Callable[[torch.Tensor], torch.Tensor]
+
+
+class TorchOps:
+    """The elementwise operations of :mod:`softenv.envs.parts`, on tensors."""
+
+    sqrt = staticmethod(torch.sqrt)
+
+    @staticmethod
+    def positive(x: torch.Tensor) -> torch.Tensor:
+        return torch.clamp(x, min=0.0)
+
+    @staticmethod
+    def clip(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
+        return torch.clamp(x, low, high)
+
+    @staticmethod
+    def stack(columns: list[torch.Tensor]) -> torch.Tensor:
+        return torch.stack(columns, dim=-1)
+
+
+# -- splitmix64 on int64 tensors (two's-complement wrap-around, as torch's integer ops do) ----------
+
+_GOLDEN = 0x9E3779B97F4A7C15
+_MIX1, _MIX2 = 0xBF58476D1CE4E5B9, 0x94D049BB133111EB
+DRAWS_PER_EPISODE = 8          # counter slots reserved per episode (5 used: the cell and 4 coordinates)
+
+
+def as_int64(value: int) -> int:
+    """A Python int modulo 2^64, as the int64 with the same bits."""
+    value &= (1 << 64) - 1
+    return value - (1 << 64) if value >= 1 << 63 else value
+
+
+def _shift_right(x: torch.Tensor, s: int) -> torch.Tensor:
+    return (x >> s) & ((1 << (64 - s)) - 1)        # logical shift (torch's >> on int64 keeps the sign)
+
+
+def splitmix64(seed: torch.Tensor, counter: torch.Tensor) -> torch.Tensor:
+    """Output number ``counter`` (>= 1) of the splitmix64 generator started at ``seed`` (int64 tensors,
+    broadcast): ``mix(seed + counter * golden)``, Steele, Lea and Flood's SplitMix finaliser."""
+    z = seed + counter * as_int64(_GOLDEN)
+    z = (z ^ _shift_right(z, 30)) * as_int64(_MIX1)
+    z = (z ^ _shift_right(z, 27)) * as_int64(_MIX2)
+    return z ^ _shift_right(z, 31)
+
+
+def episode_uniforms(seed: torch.Tensor, episode: torch.Tensor, count: int) -> torch.Tensor:
+    """``count`` uniforms in [0, 1) (float64, 53 random bits) for each env's episode: ``(N, count)``."""
+    slots = torch.arange(1, count + 1, device=seed.device)
+    z = splitmix64(seed[:, None], episode[:, None] * DRAWS_PER_EPISODE + slots)
+    return _shift_right(z, 11).to(torch.float64) * 2.0 ** -53
+
+
+# -- episode sources --------------------------------------------------------------------------------
+
+
+class HostEpisodes:
+    """Episodes from the per-env numpy generators, precomputed on the host (the numpy twin's)."""
+
+    def __init__(self, world: World, num_envs: int, tensor: Callable[..., torch.Tensor]) -> None:
+        self.world, self.tensor = world, tensor
+        self.rngs = [np.random.default_rng() for _ in range(num_envs)]
+        self.arrays: dict[str, torch.Tensor] = {}
+        self.rows = torch.arange(num_envs, device=tensor(0.0).device)
+
+    def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
+        from .soft_sphere import seeded_episodes
+
+        self.rngs, episodes = seeded_episodes(self.world, self.rngs, seed, options)
+        self.arrays = {name: self.tensor(getattr(episodes, name), _dtype_of(name, None))
+                       for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
+
+    def references(self, t: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """This step's target shape, its reference (squared), and the zero and oracle error sums so far."""
+        ep, T = self.arrays, self.arrays["sq_ref"].shape[1]
+        ti, hi = torch.clamp(t, max=T - 1), torch.clamp(t, max=self.world.horizon - 1)
+        return (ep["target_b"][self.rows, ti], ep["sq_ref"][self.rows, ti],
+                ep["zero_cum"][self.rows, hi], ep["oracle_cum"][self.rows, hi])
+
+    def upcoming(self, t: torch.Tensor) -> torch.Tensor:
+        """The target shape observed before step ``t``."""
+        T = self.arrays["sq_ref"].shape[1]
+        return self.arrays["target_b"][self.rows, torch.clamp(t, max=T - 1)]
+
+    def first(self) -> torch.Tensor:
+        return self.arrays["target_b"][:, 0]
+
+    def restart(self, mask: torch.Tensor) -> bool:
+        """Draw new episodes for the masked envs; False when none ended (a host read of the mask)."""
+        idx = mask.nonzero()[:, 0].tolist()
+        if not idx:
+            return False
+        new = self.world.start_episodes([self.rngs[i] for i in idx])
+        rows = torch.as_tensor(idx, device=self.rows.device)
+        for name, value in self.arrays.items():
+            value[rows] = self.tensor(getattr(new, name), value.dtype)
+        return True
+
+
+class DeviceEpisodes:
+    """Episodes drawn and scored on the device (see the module docstring).
+
+    The target is drawn as :meth:`~softenv.envs.parts.TargetFamily.sample` draws it (a cell of the
+    split, then a point in it), from uniforms of :func:`episode_uniforms`. ``reset(seed=s)`` seeds env
+    ``i`` with ``s + i`` and restarts its episode count; ``reset()`` goes on to each env's next episode.
+    """
+
+    def __init__(self, world: World, num_envs: int, tensor: Callable[..., torch.Tensor], lookup: Lookup) -> None:
+        self.world, self.tensor, self.lookup = world, tensor, lookup
+        n, k = num_envs, world.k
+        device = tensor(0.0).device
+        family = world.family
+        self.cells = torch.as_tensor(family.cells, dtype=torch.float64, device=device)
+        self.n_cells = family.n_cells
+        self.low, self.span = tensor(family.low, torch.float64), tensor(family.high - family.low, torch.float64)
+        self.b_rest = tensor(world.b_rest)
+        self.seed = torch.zeros(n, dtype=torch.int64, device=device)
+        self.episode = torch.zeros(n, dtype=torch.int64, device=device)
+        self.features = tensor(np.zeros((n, 4)))
+        self.target = tensor(np.zeros((n, k)))              # the target shape of each env's coming step
+        self.zero_cum, self.oracle_cum = tensor(np.zeros(n), torch.float64), tensor(np.zeros(n), torch.float64)
+        self.creep = tensor(np.zeros((n, k)))                 # the oracle's creep state (viscoelastic tissue)
+        self.seeded = False
+
+    # -- episode starts -----------------------------------------------------------------------------
+
+    def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
+        from .soft_sphere import _target_option
+
+        n = len(self.seed)
+        if seed is None and not self.seeded:
+            seed = int(np.random.SeedSequence().entropy % (1 << 63))
+        if seed is None:
+            self.episode = self.episode + 1
+        else:
+            seeds = [int(seed) + i for i in range(n)] if isinstance(seed, (int, np.integer)) else list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed has {len(seeds)} entries; num_envs={n}")
+            for s in seeds:
+                if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
+                    raise ValueError(f"seed={s!r} must be an int >= 0 or None")
+            fresh = torch.tensor([s is not None for s in seeds], device=self.seed.device)
+            given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=self.seed.device)
+            self.seed = torch.where(fresh, given, self.seed)
+            self.episode = torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1)
+        self.seeded = True
+        everyone = torch.ones(n, dtype=torch.bool, device=self.seed.device)
+        target = _target_option(self.world, options)
+        features = self.draw() if target is None else self.tensor(np.broadcast_to(target, (n, 4)))
+        self.features = features.to(self.features.dtype)
+        self._begin(everyone)
+
+    def draw(self) -> torch.Tensor:
+        """Each env's target for its current episode number, ``(N, 4)`` float64."""
+        u = episode_uniforms(self.seed, self.episode, 5)
+        n_split = len(self.cells)
+        cell = self.cells[torch.clamp((u[:, 0] * n_split).to(torch.int64), max=n_split - 1)]
+        return self.low + (cell + u[:, 1:]) / self.n_cells * self.span
+
+    def restart(self, mask: torch.Tensor) -> bool:
+        """Start the masked envs' next episodes (for every env at once: no host read)."""
+        self.episode = self.episode + mask.to(torch.int64)
+        self.features = torch.where(mask[:, None], self.draw().to(self.features.dtype), self.features)
+        self._begin(mask)
+        return True
+
+    def _begin(self, mask: torch.Tensor) -> None:
+        step0 = torch.zeros(len(mask), dtype=torch.int64, device=mask.device)
+        self.target = torch.where(mask[:, None], self.lookup(self._schedule(step0)), self.target)
+        zero = torch.zeros_like(self.zero_cum)
+        self.zero_cum = torch.where(mask, zero, self.zero_cum)
+        self.oracle_cum = torch.where(mask, zero, self.oracle_cum)
+        self.creep = torch.where(mask[:, None], self.b_rest, self.creep)
+
+    def _schedule(self, step: torch.Tensor) -> torch.Tensor:
+        if self.world.task_kind == "reach":
+            return self.features
+        t = (step.to(self.features.dtype) + 1) / self.world.horizon
+        return procedure_features(self.features, t, self.world.start_insertion, TorchOps)
+
+    # -- the step -------------------------------------------------------------------------------
+
+    def references(self, t: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """As :meth:`HostEpisodes.references`; the error sums of the stepped envs advance by this step."""
+        w = self.world
+        target = self.target
+        r = target - self.b_rest
+        rr = torch.sum(r * r, dim=-1)
+        sq_ref = torch.clamp(rr, min=w.floor_sq)
+        zero_cum = self.zero_cum + torch.sqrt(rr / sq_ref).to(torch.float64)
+        oracle_cum = self.oracle_cum
+        dyn = w.dynamics
+        if dyn.stateful:                    # the oracle holds the target force from the start: it creeps too
+            creep = self.creep + (target - self.creep) * dyn.move
+            d = (dyn.r * target + dyn.one_minus_r * creep) - target
+            oracle_cum = oracle_cum + torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref).to(torch.float64)
+            self.creep = torch.where(stepped[:, None], creep, self.creep)
+        self.zero_cum = torch.where(stepped, zero_cum, self.zero_cum)
+        self.oracle_cum = torch.where(stepped, oracle_cum, self.oracle_cum)
+        return target, sq_ref, zero_cum, oracle_cum
+
+    def upcoming(self, t: torch.Tensor) -> torch.Tensor:
+        if self.world.task_kind != "reach":     # the procedure's target moves: look up the next step's
+            self.target = self.lookup(self._schedule(torch.clamp(t, max=self.world.horizon - 1)))
+        return self.target
+
+    def first(self) -> torch.Tensor:
+        return self.target               # right after _begin, the masked rows hold their first target
+
+
+def _dtype_of(name: str, dtype: torch.dtype | None) -> torch.dtype | None:
+    # the score's running sums stay float64 in either dtype: a float32 sum over an episode drifts by 1e-5
+    return torch.float64 if name in ("zero_cum", "oracle_cum", "agent_cum") else dtype
