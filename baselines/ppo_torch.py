@@ -2,7 +2,8 @@
 
 Rollouts, advantages, observation statistics and updates are tensors on one device (``--device cuda``
 or ``cpu``); the env is ``gym.make_vec(..., backend="torch")`` with same-step autoreset, so nothing is
-copied to numpy while training. Read it top to bottom: arguments, the agent, the observation
+copied to numpy while training. On a GPU its targets are drawn on the device (``target_draw="device"``:
+a step never synchronises with the host); on CPU by the numpy generators, the faster there. Read it top to bottom: arguments, the agent, the observation
 normaliser, one training loop (rollout -> GAE -> clipped updates), then evaluation on the test
 targets with the benchmark's protocol (``baselines.evaluate``: 100 episodes, normalized score
 against the scene's oracle).
@@ -40,6 +41,7 @@ class Args:
     scene: str = "SoftSphere-v0"             # an ideal-device benchmark scene (baselines.evaluate.SCENES)
     seed: int = 0
     device: str = "cpu"
+    target_draw: str | None = None           # "host" or "device"; None: "device" on a GPU, else "host"
     total_timesteps: int = 600_000
     num_envs: int = 16
     num_steps: int = 128                     # rollout length per env
@@ -128,6 +130,7 @@ def make_env(args: Args, split: str = "train") -> Any:
     kwargs["task"] = {**kwargs["task"], "split": split}
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
                         device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
+                        target_draw=args.target_draw or ("device" if args.device.startswith("cuda") else "host"),
                         **kwargs)
 
 
@@ -260,6 +263,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--scene", default=Args.scene)
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--device", default="cpu")
+    p.add_argument("--target-draw", choices=["host", "device"],
+                   help="where training targets are drawn (default: device on a GPU, host on CPU)")
     p.add_argument("--total-timesteps", type=int, default=Args.total_timesteps)
     p.add_argument("--no-normalize-obs", action="store_true", help="feed raw observations (as SB3's PPO here)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per seed")
@@ -270,7 +275,7 @@ def main(argv: list[str] | None = None) -> None:
     command = "python -m baselines.ppo_torch " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
     torch.set_num_threads(1)
     zero, oracle, _ = anchor_job(a.scene, a.episodes, {})
-    jobs = [Job(f"seed {seed}", seed_job, (Args(scene=a.scene, seed=seed, device=a.device,
+    jobs = [Job(f"seed {seed}", seed_job, (Args(scene=a.scene, seed=seed, device=a.device, target_draw=a.target_draw,
                                                 total_timesteps=a.total_timesteps,
                                                 normalize_obs=not a.no_normalize_obs), a.episodes, a.out))
             for seed in a.seeds]

@@ -26,11 +26,21 @@ def test_a_short_run_on_cpu_tensors_learns_to_press(trained):
     """12 updates (12k env steps) already beat the random policy on the test targets, by far."""
     args, agent, run = trained
     assert run["env_steps"] == 16 * 64 * 12 and run["steps_per_s"] > 0
+    _assert_beats_random(agent)
+
+
+def _assert_beats_random(agent):
     kwargs = scene_kwargs("SoftSphere-v0")[1]
     kwargs.pop("obs_mode")
     random = evaluate(make_baseline("random", World(make_config(**kwargs))), "SoftSphere-v0", episodes=20)
     ppo = evaluate(TorchPolicy(agent), "SoftSphere-v0", episodes=20)
     assert ppo.values["error_sum_mm"].mean() < 0.7 * random.values["error_sum_mm"].mean()
+
+
+def test_training_on_device_drawn_targets_learns_as_well():
+    """The GPU default (targets drawn on the device, no host sync), run on CPU tensors."""
+    agent, _ = train(Args(seed=0, target_draw="device", **SHORT), log=lambda line: None)
+    _assert_beats_random(agent)
 
 
 def test_the_same_seed_trains_the_same_weights(trained):
