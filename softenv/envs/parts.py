@@ -68,8 +68,13 @@ class TargetFamily:
         return (self.low + self.high) / 2
 
     def sample(self, rng: np.random.Generator) -> np.ndarray:
-        cell = self.cells[rng.integers(len(self.cells))]
-        unit = (cell + rng.random(self.low.size)) / self.n_cells
+        return self.sample_many([rng])[0]
+
+    def sample_many(self, rngs: list[np.random.Generator]) -> np.ndarray:
+        """One target per generator, ``(len(rngs), d)``: each generator draws its cell, then its point."""
+        draws = [(rng.integers(len(self.cells)), rng.random(self.low.size)) for rng in rngs]
+        cell = self.cells[[i for i, _ in draws]]
+        unit = (cell + np.array([u for _, u in draws]).reshape(len(rngs), self.low.size)) / self.n_cells
         return self.low + unit * (self.high - self.low)
 
     def cell_of(self, features: np.ndarray) -> np.ndarray:

@@ -378,19 +378,17 @@ class SoftSphereVectorEnv(VectorEnv):
         theirs (zero reward, no flags). Returns observations, rewards, flags and the info terms."""
         w = self.world
         ep = self._episode
-        T = ep.sq_ref.shape[1]
         rows = np.arange(self.num_envs)
-        ti = np.minimum(self._t, T - 1)
         f, normal, sideways = self._actuate(a, stepped)
         g = w.response(f)
         z = self._z.copy() if w.dynamics.stateful else self._z      # the creep state is committed per row below
         b = w.dynamics.step(z, g)
-        target = ep.target_b[rows, ti]
+        target, sq_ref = self._targets(ep.target_b), self._targets(ep.sq_ref)
         d = b - target
         sq = np.sum(d * d, axis=-1)
         c = a - self._prev
         change = c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2] + c[:, 3] * c[:, 3]
-        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, ep.sq_ref[rows, ti], normal, sideways, change,
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways, change,
                                                                        w.weights, ArrayOps)
         agent_cum = self._agent_cum + ratio
         peak = np.maximum(self._peak, force)
@@ -399,10 +397,15 @@ class SoftSphereVectorEnv(VectorEnv):
         success = ratio < w.tolerance
         # commit the stepped envs only (next-step autoreset leaves the others to _start below)
         s = stepped
-        m = slice(None) if s.all() else s          # every env steps (always in same-step mode): no mask gathers
-        self._z[m], self._b[m], self._prev[m], self._features[m] = z[m], b[m], a[m], f[m]
-        self._agent_cum[m], self._peak[m], self._last_target[m] = agent_cum[m], peak[m], target[m]
-        self._t[m] += 1
+        if s.all():         # every env steps (always in same-step mode): fresh arrays become the state
+            self._z, self._b, self._features, self._agent_cum = z, b, f, agent_cum
+            # copied: the caller's actions, episode rows, and peak (returned in info)
+            self._prev[:], self._last_target[:], self._peak[:] = a, target, peak
+            self._t += 1
+        else:
+            self._z[s], self._b[s], self._prev[s], self._features[s] = z[s], b[s], a[s], f[s]
+            self._agent_cum[s], self._peak[s], self._last_target[s] = agent_cum[s], peak[s], target[s]
+            self._t[s] += 1
         terminated = (success & w.terminate_on_success) & s
         truncated = (self._t >= w.horizon) & s
         info_values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
@@ -483,8 +486,14 @@ class SoftSphereVectorEnv(VectorEnv):
         self._start(mask)
 
     def _upcoming_target(self) -> np.ndarray:
-        T = self._episode.sq_ref.shape[1]
-        return self._episode.target_b[np.arange(self.num_envs), np.minimum(self._t, T - 1)]
+        return self._targets(self._episode.target_b)
+
+    def _targets(self, per_step: np.ndarray) -> np.ndarray:
+        """Each env's row of an ``(N, T, ...)`` episode array at its current step (a view for reach tasks)."""
+        T = per_step.shape[1]
+        if T == 1:
+            return per_step[:, 0]
+        return per_step[np.arange(self.num_envs), np.minimum(self._t, T - 1)]
 
     def _observe(self, b: np.ndarray, target: np.ndarray, device_obs: np.ndarray, prev: np.ndarray) -> Any:
         return self.world.observe(b, target, device_obs, prev)
@@ -563,6 +572,7 @@ def _add_masked(infos: dict[str, Any], values: dict[str, np.ndarray], mask: np.n
     """Vector-env infos as SyncVectorEnv builds them: zeros where the mask is off, plus ``_key``."""
     if not mask.any():
         return
+    everyone = mask.all()
     for key, value in values.items():
         if value.dtype == object:        # per-env nested infos (a dict, None where absent), nested as SyncVectorEnv does
             present = mask & np.array([v is not None for v in value])
@@ -570,7 +580,7 @@ def _add_masked(infos: dict[str, Any], values: dict[str, np.ndarray], mask: np.n
                 infos[key], infos[f"_{key}"] = _nested(value, present), present
             continue
         rows = mask.reshape(mask.shape + (1,) * (np.ndim(value) - 1))      # per-env vectors: mask each row
-        infos[key] = np.where(rows, value, np.zeros((), dtype=value.dtype))
+        infos[key] = value.copy() if everyone else np.where(rows, value, np.zeros((), dtype=value.dtype))
         infos[f"_{key}"] = mask.copy()
 
 

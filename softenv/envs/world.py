@@ -127,8 +127,8 @@ class World:
         """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
         k, d = self.k, self._device_end
         obs = np.empty(b.shape[:-1] + (self.obs_size,), np.float32)   # float64 values rounded on assignment
-        obs[..., :k] = b * self.inv_sqrt
-        obs[..., k:2 * k] = target_b * self.inv_sqrt
+        np.multiply(b, self.inv_sqrt, out=obs[..., :k])                  # (no float64 temporaries)
+        np.multiply(target_b, self.inv_sqrt, out=obs[..., k:2 * k])
         if isinstance(device_state, list):                              # the single env's fast path
             obs[2 * k:] = device_state + prev_action
         else:
@@ -177,7 +177,12 @@ class World:
         """Draw one target per generator (or take the given force features) and precompute the episode."""
         n = len(rngs)
         given = targets or [None] * n
-        target = np.stack([t if t is not None else self.family.sample(rng) for rng, t in zip(rngs, given)])
+        drawn = [i for i, t in enumerate(given) if t is None]
+        target = np.empty((n, 4))
+        target[drawn] = self.family.sample_many([rngs[i] for i in drawn])
+        for i, t in enumerate(given):
+            if t is not None:
+                target[i] = t
         if self.task_kind == "reach":
             features = target[:, None, :]
         else:
