@@ -127,8 +127,8 @@ class World:
         """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
         k, d = self.k, self._device_end
         obs = np.empty(b.shape[:-1] + (self.obs_size,), np.float32)   # float64 values rounded on assignment
-        np.multiply(b, self.inv_sqrt, out=obs[..., :k])                  # (no float64 temporaries)
-        np.multiply(target_b, self.inv_sqrt, out=obs[..., k:2 * k])
+        obs[..., :k] = b * self.inv_sqrt
+        obs[..., k:2 * k] = target_b * self.inv_sqrt
         if isinstance(device_state, list):                              # the single env's fast path
             obs[2 * k:] = device_state + prev_action
         else:
