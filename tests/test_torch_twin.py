@@ -152,6 +152,20 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     assert sum("torch twin on" in r.metric for r in rows) == 4
 
 
+def test_the_gpu_rows_run_on_cpu_tensors_too():
+    """The GPU section's code path (sizes, eager and compiled timings, targets) on CPU tensors, so a
+    first GPU run does not meet it untried."""
+    from softenv.bench.env import device_rows
+
+    rows = device_rows("cpu", "cpu", (1024, 64), 2)
+    twins = [r for r in rows if "torch twin on cpu" in r.metric]
+    assert [("torch.compile" in r.metric, "1,024 envs" in r.metric) for r in twins] == [
+        (False, True), (True, True), (False, False), (True, False)]
+    assert all(r.value > 0 and r.target == ">= 10M" and r.ok is (r.value >= 10e6) for r in twins[:2])
+    assert all(r.target == "" and r.ok is None for r in twins[2:])
+    assert rows[1].ok is None and "needs CUDA" in rows[1].spread
+
+
 # -- target_draw="device": episodes drawn and scored on the device -------------------------------
 
 
