@@ -12,7 +12,7 @@ shape and against the score's two anchors (the zero-force and the oracle error s
   device and for any ``num_envs``), and the references are computed step by step alongside the
   agent (the target's shape by the response table, the anchors as running sums, the oracle's creep
   as a second state). Nothing is read back to the host and every shape is static, so a step can be
-  captured whole by ``torch.compile`` or a CUDA graph.
+  captured whole by ``torch.compile(fullgraph=True)``.
 """
 
 from __future__ import annotations

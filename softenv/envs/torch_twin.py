@@ -19,7 +19,7 @@ numpy generators and precomputes each episode on the host, so it plays the numpy
 starting an episode mid-run reads which envs ended (one host synchronisation per step).
 ``"device"`` draws and scores episodes on the device (:mod:`softenv.envs.torch_parts`): with
 ``check_actions=False`` a step then never synchronises with the host and keeps every shape static,
-so ``torch.compile(fullgraph=True)`` and CUDA graphs can capture it (tested). Its targets come from
+so ``torch.compile(fullgraph=True)`` captures it whole (tested). Its targets come from
 another generator, so its episodes differ from the numpy twin's; given the same target, the two
 agree to rounding (tested).
 """
