@@ -252,8 +252,10 @@ FORBIDDEN = {"item", "tolist", "nonzero", "__bool__", "numpy", "cpu"}   # host r
 @pytest.mark.parametrize("mode", ["same_step", "next_step"])
 def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
     """torch.compile(fullgraph=True) captures the whole step (no Python branch on a tensor's value, no
-    data-dependent shape), the graph reads nothing back to the host, and it replays the eager env. The
-    host draw's step does break the graph (at its restart): the check can fail."""
+    data-dependent shape), the graphs read nothing back to the host, and they replay the eager env.
+    The host's step count picks the graph (steps where episodes may start, and the others: at most
+    three graphs with the first step's). The host draw's step does break the graph (at its restart):
+    the check can fail."""
     graphs = []
 
     def recorder(gm, example_inputs):
@@ -274,8 +276,8 @@ def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
         got, want = step(a), eager.step(a)
         assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1])
         assert torch.equal(got[4]["normalized_score"], want[4]["normalized_score"])
-    assert len(graphs) == 1
-    for node in graphs[0].graph.nodes:
+    assert 2 <= len(graphs) <= 3
+    for node in (node for graph in graphs for node in graph.graph.nodes):
         name = node.target if isinstance(node.target, str) else getattr(node.target, "__name__", "")
         assert name not in FORBIDDEN, node.format_node()
         value = node.meta.get("example_value")
@@ -283,6 +285,33 @@ def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
             assert all(isinstance(d, int) for d in value.shape), node.format_node()
     torch._dynamo.reset()
     host = made("host")
+    host_step = torch.compile(host.unwrapped.step, backend=recorder, fullgraph=True)
     with pytest.raises(Exception, match="data-dependent"):
-        torch.compile(host.unwrapped.step, backend=recorder, fullgraph=True)(actions[0])
+        for a in actions:                                   # breaks at the first step where episodes start
+            host_step(a)
     torch._dynamo.reset()
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+@pytest.mark.parametrize("draw", ["host", "device"])
+def test_episodes_start_only_on_the_steps_the_host_expects(mode, draw):
+    """Without success termination the env skips the episode-start work on steps where no episode can
+    end (known from the host's step count): it plays exactly as the env that checks every step."""
+    def made():
+        env = _make("SoftSphereProcedure-v0", "torch", num_envs=3, target_draw=draw, autoreset_mode=mode,
+                    max_episode_steps=5)
+        env.reset(seed=3)
+        return env
+
+    gated, checked = made(), made()
+    checked.unwrapped._episodes_may_start = lambda: True
+    gate, opened = gated.unwrapped._episodes_may_start, []
+    gated.unwrapped._episodes_may_start = lambda: opened.append(gate()) or opened[-1]
+    for a in torch.as_tensor(np.random.default_rng(4).uniform(-1, 1, (23, 3, 4))):
+        got, want = gated.step(a), checked.step(a)
+        for x, y in zip(got[:4], want[:4]):
+            assert torch.equal(x, y)
+        assert torch.equal(got[4]["normalized_score"], want[4]["normalized_score"])
+    # open on steps 5, 10, 15, 20 (same-step) or 6, 12, 18 (next-step: the step after each end)
+    expected = [5, 10, 15, 20] if mode == "same_step" else [6, 12, 18]
+    assert [i + 1 for i, was_open in enumerate(opened) if was_open] == expected

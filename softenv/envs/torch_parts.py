@@ -6,7 +6,7 @@ shape and against the score's two anchors (the zero-force and the oracle error s
 * :class:`HostEpisodes` (``target_draw="host"``): the per-env numpy generators draw the targets, and
   :meth:`~softenv.envs.world.World.start_episodes` precomputes every episode on the host, exactly as
   the numpy twin does, so both twins play the same episodes. Starting episodes mid-run reads which
-  envs ended: one host synchronisation per step.
+  envs ended: one host synchronisation on each step where an episode can end.
 * :class:`DeviceEpisodes` (``target_draw="device"``): the targets are drawn on the device from a
   counter-based generator (splitmix64 of the env's seed and episode number: the same numbers on any
   device and for any ``num_envs``), and the references are computed step by step alongside the

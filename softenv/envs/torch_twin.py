@@ -16,7 +16,9 @@ dict. Not: the laryngoscope (pymunk has no tensors), regressor responses and ver
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
 numpy generators and precomputes each episode on the host, so it plays the numpy twin's episodes;
-starting an episode mid-run reads which envs ended (one host synchronisation per step).
+starting an episode mid-run reads which envs ended: one host synchronisation on each step where an
+episode can end. Without success termination (the default) those are known on the host, once per
+``horizon`` steps; with it, every step.
 ``"device"`` draws and scores episodes on the device (:mod:`softenv.envs.torch_parts`): with
 ``check_actions=False`` a step then never synchronises with the host and keeps every shape static,
 so ``torch.compile(fullgraph=True)`` captures it whole (tested). Its targets come from
@@ -112,6 +114,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._last_target = t(np.empty((n, k)))
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
+        self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
 
     def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device).to(dtype or self.dtype)
@@ -121,7 +124,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         self._episodes.reset(seed, options)
-        self._started = True
+        self._started, self._clock = True, 0
         everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
         self._start(everyone)
         self._autoreset[:] = False
@@ -131,6 +134,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         a = self._checked(actions)
+        self._clock += 1
         infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
             obs, reward, terminated, truncated, values = self._advance(a, torch.ones_like(self._autoreset))
@@ -256,9 +260,18 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._peak = torch.where(mask, torch.zeros_like(self._peak), self._peak)
         self._last_target = torch.where(rows, self._episodes.first(), self._last_target)
 
+    def _episodes_may_start(self) -> bool:
+        """Whether an env can start an episode this step. Without success termination every episode lasts
+        the horizon and all began at reset(), so the host knows those steps (no read of the flags): one
+        in ``horizon`` steps (same-step autoreset) or ``horizon + 1`` (next-step: the step after the end)."""
+        if self.world.terminate_on_success:
+            return True
+        period = self.world.horizon + (self.autoreset_mode == AutoresetMode.NEXT_STEP)
+        return self._clock % period == 0
+
     def _restart_rows(self, obs: Any, mask: torch.Tensor) -> Any:
         """Draw new episodes for the masked envs, reset their state and write their first observations."""
-        if not self._episodes.restart(mask):
+        if not self._episodes_may_start() or not self._episodes.restart(mask):
             return obs
         self._start(mask)
         fresh = self._observe(self._b, self._episodes.first(), self._features, self._prev)
