@@ -95,7 +95,7 @@ class HostEpisodes:
         from .soft_sphere import seeded_episodes
 
         self.rngs, episodes = seeded_episodes(self.world, self.rngs, seed, options)
-        self.arrays = {name: self.tensor(getattr(episodes, name), _dtype_of(name, None))
+        self.arrays = {name: self.tensor(getattr(episodes, name), sum_dtype(name, None))
                        for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
 
     def references(self, t: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -236,6 +236,6 @@ class DeviceEpisodes:
         return self.target               # right after _begin, the masked rows hold their first target
 
 
-def _dtype_of(name: str, dtype: torch.dtype | None) -> torch.dtype | None:
+def sum_dtype(name: str, dtype: torch.dtype | None) -> torch.dtype | None:
     # the score's running sums stay float64 in either dtype: a float32 sum over an episode drifts by 1e-5
     return torch.float64 if name in ("zero_cum", "oracle_cum", "agent_cum") else dtype

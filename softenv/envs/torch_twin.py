@@ -38,7 +38,7 @@ from gymnasium.vector.utils import batch_space
 from ..response import TabulatedResponse
 from .config import scene_config
 from .parts import reward_terms
-from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, _dtype_of
+from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, sum_dtype
 from .world import World
 
 
@@ -110,7 +110,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
         self._features, self._prev = t(np.empty((n, 4))), t(np.empty((n, 4)))
         self._t = torch.zeros(n, dtype=torch.int64, device=self.device)
-        self._agent_cum, self._peak = t(np.zeros(n), _dtype_of("agent_cum", dtype)), t(np.zeros(n))
+        self._agent_cum, self._peak = t(np.zeros(n), sum_dtype("agent_cum", dtype)), t(np.zeros(n))
         self._last_target = t(np.empty((n, k)))
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
