@@ -242,6 +242,10 @@ def test_device_targets_cover_the_split_are_reproducible_and_move_on_at_autorese
     assert not np.isclose(third, second).all(axis=1).any()
     with pytest.raises(ValueError, match=r"seed=-1 must be an int >= 0"):
         env.reset(seed=[-1] + [0] * (n - 1))
+    with pytest.raises(ValueError, match="outside the target family"):
+        env.reset(seed=5, options={"target": [2.0, 0.0, 0.0, 0.0]})
+    assert np.array_equal(source.features.numpy(), third)        # the refused resets changed nothing
+    assert torch.equal(source.episode, torch.full((n,), 2))
     with pytest.raises(ValueError, match="target_draw='gpu' must be 'host' or 'device'"):
         _make("SoftSphere-v0", "torch", num_envs=2, target_draw="gpu")
 

@@ -156,10 +156,9 @@ class DeviceEpisodes:
         from .soft_sphere import _target_option
 
         n = len(self.seed)
-        if seed is None and not self.seeded:
-            seed = int(np.random.SeedSequence().entropy % (1 << 63))
+        target = _target_option(self.world, options)            # everything is checked before the state changes
         if seed is None:
-            self.episode = self.episode + 1
+            seeds: list[Any] = [None] * n
         else:
             seeds = [int(seed) + i for i in range(n)] if isinstance(seed, (int, np.integer)) else list(seed)
             if len(seeds) != n:
@@ -167,13 +166,16 @@ class DeviceEpisodes:
             for s in seeds:
                 if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
                     raise ValueError(f"seed={s!r} must be an int >= 0 or None")
-            fresh = torch.tensor([s is not None for s in seeds], device=self.seed.device)
-            given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=self.seed.device)
-            self.seed = torch.where(fresh, given, self.seed)
-            self.episode = torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1)
+        if not self.seeded:                    # an env never seeded starts from fresh entropy
+            base = int(np.random.SeedSequence().entropy % (1 << 63))
+            seeds = [base + i if s is None else s for i, s in enumerate(seeds)]
+        device = self.seed.device
+        fresh = torch.tensor([s is not None for s in seeds], device=device)
+        given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=device)
+        self.seed = torch.where(fresh, given, self.seed)
+        self.episode = torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1)
         self.seeded = True
-        everyone = torch.ones(n, dtype=torch.bool, device=self.seed.device)
-        target = _target_option(self.world, options)
+        everyone = torch.ones(n, dtype=torch.bool, device=device)
         features = self.draw() if target is None else self.tensor(np.broadcast_to(target, (n, 4)))
         self.features = features.to(self.features.dtype)
         self._begin(everyone)
