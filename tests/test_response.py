@@ -286,6 +286,8 @@ def test_table_scalar_and_vector_lookups_agree_bitwise():
     batch = table.lookup(x)
     for i in range(300):
         assert np.array_equal(table.lookup_one(x[i].tolist()), batch[i])
+    table.CHUNK = 64                                  # large batches go in chunks (here 4 full and a partial one)
+    assert np.array_equal(table.lookup(x), batch)
     with pytest.raises(ValueError, match=r"forces\[0, 2\] = 41 lies outside the tabulated range \[0, 40\]"):
         table.predict([0.01, 0.0, 41.0, 0.0])
 

@@ -83,18 +83,15 @@ class TargetFamily:
         return np.minimum((unit * self.n_cells).astype(int), self.n_cells - 1)
 
 
-def target_schedule(kind: str, target: np.ndarray, start_insertion: float, horizon: int) -> np.ndarray:
-    """Target force features for every step of an episode, ``(horizon, 4)``.
-
-    ``reach``: the target force throughout. ``procedure``: the laryngoscopy sequence in three equal
-    phases -- *insert* (the blade slides from the front of the range to the target depth with a light
-    touch of 10 % of the target's pressing force), *press* (the pressing force rises to the target's),
-    *sweep* (the sideways force rises to the target's); see :func:`procedure_features`.
+def procedure_schedule(targets: np.ndarray, start_insertion: float, horizon: int) -> np.ndarray:
+    """The procedure task's target force features at every step, ``(n, horizon, 4)`` for targets
+    ``(n, 4)``: the laryngoscopy sequence in three equal phases -- *insert* (the blade slides from the
+    front of the range to the target depth with a light touch of 10 % of the target's pressing force),
+    *press* (the pressing force rises to the target's), *sweep* (the sideways force rises to the
+    target's); see :func:`procedure_features`. (A reach task holds its target throughout.)
     """
-    if kind == "reach":
-        return np.tile(target, (horizon, 1))
     t = (np.arange(horizon) + 1) / horizon
-    return procedure_features(target[None, :], t, start_insertion, ArrayOps)
+    return procedure_features(targets[:, None, :], t, start_insertion, ArrayOps)
 
 
 def procedure_features(target: Any, t: Any, start_insertion: float, ops: Any) -> Any:

@@ -21,7 +21,7 @@ from .._validation import real_array
 from ..response import TabulatedResponse
 from ..devices import device_obs_names
 from ..devices.ideal import IdealDevice
-from .parts import Dynamics, TargetFamily, target_schedule
+from .parts import Dynamics, TargetFamily, procedure_schedule
 from .scene import Scene, build_scene, degrees_to_features
 
 OBS_MODES = ("vector", "dict", "vertices")
@@ -186,7 +186,7 @@ class World:
         if self.task_kind == "reach":
             features = target[:, None, :]
         else:
-            features = np.stack([target_schedule("procedure", t, self.start_insertion, self.horizon) for t in target])
+            features = procedure_schedule(target, self.start_insertion, self.horizon)
         T = features.shape[1]
         target_b = self.response(features.reshape(n * T, 4)).reshape(n, T, self.k)
         r = target_b - self.b_rest
