@@ -2,8 +2,8 @@
 
 Rollouts, advantages, observation statistics and updates are tensors on one device (``--device cuda``
 or ``cpu``); the env is ``gym.make_vec(..., backend="torch")`` with same-step autoreset, so nothing is
-copied to numpy while training. On a GPU its targets are drawn on the device (``target_draw="device"``:
-a step never synchronises with the host); on CPU by the numpy generators, the faster there. Read it top to bottom: arguments, the agent, the observation
+copied to numpy while training. Its training targets are drawn on the device (``target_draw="device"``:
+a step never synchronises with the host; on CPU it is also the faster draw). Read it top to bottom: arguments, the agent, the observation
 normaliser, one training loop (rollout -> GAE -> clipped updates), then evaluation on the test
 targets with the benchmark's protocol (``baselines.evaluate``: 100 episodes, normalized score
 against the scene's oracle).
@@ -41,7 +41,7 @@ class Args:
     scene: str = "SoftSphere-v0"             # an ideal-device benchmark scene (baselines.evaluate.SCENES)
     seed: int = 0
     device: str = "cpu"
-    target_draw: str | None = None           # "host" or "device"; None: "device" on a GPU, else "host"
+    target_draw: str = "device"              # where training targets are drawn: "device" or "host"
     total_timesteps: int = 600_000
     num_envs: int = 16
     num_steps: int = 128                     # rollout length per env
@@ -130,7 +130,7 @@ def make_env(args: Args, split: str = "train") -> Any:
     kwargs["task"] = {**kwargs["task"], "split": split}
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
                         device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
-                        target_draw=args.target_draw or ("device" if args.device.startswith("cuda") else "host"),
+                        target_draw=args.target_draw,
                         **kwargs)
 
 
@@ -263,8 +263,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--scene", default=Args.scene)
     p.add_argument("--seeds", type=int, nargs="+", default=[0])
     p.add_argument("--device", default="cpu")
-    p.add_argument("--target-draw", choices=["host", "device"],
-                   help="where training targets are drawn (default: device on a GPU, host on CPU)")
+    p.add_argument("--target-draw", choices=["host", "device"], default=Args.target_draw,
+                   help="where training targets are drawn (default: device; host: the numpy generators)")
     p.add_argument("--total-timesteps", type=int, default=Args.total_timesteps)
     p.add_argument("--no-normalize-obs", action="store_true", help="feed raw observations (as SB3's PPO here)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per seed")
@@ -305,7 +305,7 @@ def main(argv: list[str] | None = None) -> None:
             f"{machine['logical_cores']} cores, one torch thread per seed, {describe('local', a.jobs)}; torch {torch.__version__}).\n",
             "Protocol as `softenv compare`: test targets, normalized score against the scene's anchors "
             "(0 = no force, 100 = the planning oracle). Each seed trains on `gym.make_vec(..., backend=\"torch\")` "
-            "(float32, same-step autoreset) and is evaluated on the numpy twin.\n", *lines, "", summary, ""]))
+            f"(float32, same-step autoreset, {a.target_draw} target draw) and is evaluated on the numpy twin.\n", *lines, "", summary, ""]))
 
 
 if __name__ == "__main__":
