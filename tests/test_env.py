@@ -219,8 +219,8 @@ def test_train_and_test_targets_never_share_a_cell():
     family_train = World(make_config(task={"split": "train"})).family
     family_test = World(make_config(task={"split": "test"})).family
     rng = np.random.default_rng(0)
-    train = {tuple(family_train.cell_of(family_train.sample(rng))) for _ in range(400)}
-    test = {tuple(family_test.cell_of(family_test.sample(rng))) for _ in range(400)}
+    train = {tuple(cell) for cell in family_train.cell_of(family_train.sample_many([rng] * 400))}
+    test = {tuple(cell) for cell in family_test.cell_of(family_test.sample_many([rng] * 400))}
     assert train and test and not train & test
     assert len(train | test) == 3 ** 4
 

@@ -67,9 +67,6 @@ class TargetFamily:
         """The family's central force (trainee scoring's target)."""
         return (self.low + self.high) / 2
 
-    def sample(self, rng: np.random.Generator) -> np.ndarray:
-        return self.sample_many([rng])[0]
-
     def sample_many(self, rngs: list[np.random.Generator]) -> np.ndarray:
         """One target per generator, ``(len(rngs), d)``: each generator draws its cell, then its point."""
         draws = [(rng.integers(len(self.cells)), rng.random(self.low.size)) for rng in rngs]

@@ -128,7 +128,7 @@ class HostEpisodes:
 class DeviceEpisodes:
     """Episodes drawn and scored on the device (see the module docstring).
 
-    The target is drawn as :meth:`~softenv.envs.parts.TargetFamily.sample` draws it (a cell of the
+    The target is drawn as :meth:`~softenv.envs.parts.TargetFamily.sample_many` draws it (a cell of the
     split, then a point in it), from uniforms of :func:`episode_uniforms`. ``reset(seed=s)`` seeds env
     ``i`` with ``s + i`` and restarts its episode count; ``reset()`` goes on to each env's next episode.
     """
