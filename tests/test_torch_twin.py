@@ -319,3 +319,24 @@ def test_episodes_start_only_on_the_steps_the_host_expects(mode, draw):
     # open on steps 5, 10, 15, 20 (same-step) or 6, 12, 18 (next-step: the step after each end)
     expected = [5, 10, 15, 20] if mode == "same_step" else [6, 12, 18]
     assert [i + 1 for i, was_open in enumerate(opened) if was_open] == expected
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_device_draw_restarts_the_envs_that_succeed(mode):
+    """With success termination an episode can end on any step: pressing exactly each env's target
+    force succeeds at once, and only those envs start their next episode (the others hold theirs)."""
+    env = _make("SoftSphere-v0", "torch", num_envs=4, target_draw="device", autoreset_mode=mode,
+                task={"terminate_on_success": True})
+    env.reset(seed=0)
+    source, device = env.unwrapped._episodes, env.unwrapped.world.device
+    first = source.features.clone()
+    exact = (first.numpy() - device.mid) / device.half
+    actions = torch.as_tensor(np.where([[1], [0], [1], [0]], exact, -1.0))       # envs 0 and 2 press their target
+    _, _, terminated, truncated, _ = env.step(actions)
+    assert terminated.tolist() == [True, False, True, False] and not truncated.any()
+    if mode == "next_step":
+        assert torch.equal(source.features, first)
+        env.step(actions)                                                     # the step that resets them
+    assert source.episode.tolist() == [1, 0, 1, 0]
+    moved = ~torch.isclose(source.features, first).all(dim=1)
+    assert moved.tolist() == [True, False, True, False]
