@@ -221,8 +221,8 @@ class DeviceEpisodes:
         oracle_cum = self.oracle_cum
         dyn = w.dynamics
         if dyn.stateful:                    # the oracle holds the target force from the start: it creeps too
-            creep = self.creep + (target - self.creep) * dyn.move
-            d = (dyn.r * target + dyn.one_minus_r * creep) - target
+            creep = self.creep.clone()                      # step advances it in place
+            d = dyn.step(creep, target) - target
             oracle_cum = oracle_cum + torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref).to(torch.float64)
             self.creep = torch.where(stepped[:, None], creep, self.creep)
         self.zero_cum = torch.where(stepped, zero_cum, self.zero_cum)

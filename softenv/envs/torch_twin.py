@@ -188,12 +188,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
         f = self._mid + a * self._half
         g = self._response(f)
-        dyn = w.dynamics
-        if dyn.stateful:
-            z = self._z + (g - self._z) * dyn.move
-            b = dyn.r * g + dyn.one_minus_r * z
-        else:
-            z, b = self._z, g
+        z = self._z.clone() if w.dynamics.stateful else self._z     # step advances the creep state in place
+        b = w.dynamics.step(z, g)
         d = b - target
         sq = torch.sum(d * d, dim=-1)
         c = a - self._prev
