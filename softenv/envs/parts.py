@@ -38,7 +38,8 @@ class Dynamics:
         return self.kind == "viscoelastic"
 
     def step(self, z: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """Advance the creep state ``z`` (numpy array or torch tensor) in place toward ``g``; return the new shape ``b``."""
+        """Advance the creep state ``z`` (a numpy array or torch tensor) in place toward ``g``; return the
+        new shape ``b``."""
         if self.kind == "quasi_static":
             return g
         z += (g - z) * self.move
