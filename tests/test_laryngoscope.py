@@ -265,3 +265,27 @@ def test_the_haptic_loop_renders_the_press_within_the_preset():
         loop.tick([np.nan, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="env_id"):
         HapticLoop("SoftSphere-v0")
+
+
+def test_the_laryngoscope_loop_compiled_equals_the_loop_as_written() -> None:
+    """The single device's compiled substep loop against :meth:`Laryngoscope._substep_loop` run as
+    written (ScalarOps, helper calls): the same state bits after every control period, over pressing,
+    sweeping, levering and idle periods, in contact with the tongue and the incisors and at the walls."""
+    compiled, written = make_device(), make_device()
+    written._loop = Laryngoscope._substep_loop                    # the loop as written, with ScalarOps
+    assert compiled._loop is not Laryngoscope._substep_loop
+    rng = np.random.default_rng(4)
+    actions = rng.uniform(-1, 1, (400, 4))
+    actions[:150, 1] = np.abs(actions[:150, 1])                  # press into the tongue first
+    actions[150:200] = [1.0, 0.0, 0.0, 1.0]                       # insert and lever: the incisors, the walls
+    actions[300:320] = 0.0
+    touched = incisors = 0
+    for a in actions.tolist():
+        compiled.control_step(a)
+        written.control_step(a)
+        s, t = compiled.state(), written.state()
+        for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
+            assert getattr(s, field).tobytes() == getattr(t, field).tobytes(), field
+        touched += compiled.normal_force > 0
+        incisors += compiled.incisor_force > 0
+    assert touched > 100 and incisors > 10

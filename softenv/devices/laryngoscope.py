@@ -51,7 +51,7 @@ springs are stable up to ``omega h < 2``), where ``omega_max`` is the stiffest m
 all its springs (coupling, rotary coupling, and the tongue contact's explicit part wherever on the
 underside it acts: the design force's stiffness, capped where it would add substeps), or of the lateral sweep (:meth:`LaryngoscopeParams.omega_max`).
 
-Two implementations share the arithmetic (:func:`_normal_force`, :func:`_lateral_step`): :class:`Laryngoscope` steps one
+Two implementations share the arithmetic (:func:`_tongue_substep`): :class:`Laryngoscope` steps one
 device with Python floats and pymunk's attributes (the single env: a 1 kHz tick in microseconds),
 :class:`LaryngoscopeBatch` steps ``N`` devices in one pymunk space with numpy and ``pymunk.batch``.
 Both compute the same IEEE operations in the same order. In the batch, device ``i`` sits at its own
@@ -82,6 +82,7 @@ except ImportError as exc:  # pragma: no cover - the device extra is part of eve
     raise ImportError("the simulated laryngoscope needs pymunk >= 7: pip install 'softenv[device]'") from exc
 
 from .._ops import ArrayOps, ScalarOps
+from .._specialise import scalar_kernel
 from .contact import TongueContact
 from .presets import PRESETS, HapticPreset, render_components
 
@@ -248,7 +249,7 @@ class LaryngoscopeParams:
         """The tongue contact's stiffness integrated explicitly (N/m): the design force's stiffness,
         capped where it would add substeps to those that ``max_substep``, the coupling and the lateral
         spring need anyway. The stiffness above it goes to the implicit
-        barrier (:func:`_normal_force`), which is stable at any stiffness and exact at rest, so a
+        barrier (:func:`_tongue_substep`), which is stable at any stiffness and exact at rest, so a
         stiffer tongue costs no substeps and a held press still settles on the law."""
         k_ref, lateral = contact.reference_stiffness, contact.lateral_stiffness
         count = substep_count(self.dt, self._mode_omega(0.0, lateral), self.max_substep)   # needed without it
@@ -324,13 +325,20 @@ def _nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: _Constants, ops:
     return cx, cy, ops.sqrt(cx * cx + cy * cy) + 1e-300
 
 
-def _normal_force(blade: tuple, hand: tuple, cx: Any, cy: Any, dist: Any, touching: Any, loads: Any, slopes: Any,
-                  c: _Constants, ops: Any) -> tuple[Any, Any, Any, Any]:
-    """The tongue's push on the blade at its nearest point ``(cx, cy)``: ``(fx, fy, torque, P)``.
+def _tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: _Constants,
+                    ops: Any) -> tuple[Any, ...]:
+    """One substep of the tongue's contact, all its arithmetic in one frame (a substep's budget is a
+    few microseconds; each Python call in the scalar path costs a tenth of one).
 
-    ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``. The
-    law's stiffness up to ``K_ref`` is explicit; the excess ``K_ex`` (the steepest slope between here
-    and where this substep's approach speed would take the blade), with a critical damper
+    ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
+    ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
+    substep at its velocity ``hl``. Returns ``(fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor)``:
+    the tongue's push on the blade and its torque, the normal and sideways force, the contact point,
+    and the lateral state after the substep.
+
+    **Normal force**, at the blade's point ``(cx, cy)`` nearest the tongue's centre. The law's
+    stiffness up to ``K_ref`` is explicit; the excess ``K_ex`` (the steepest slope between here and
+    where this substep's approach speed would take the blade), with a critical damper
     ``c_ex = 2 sqrt(K_ex m)`` so that the stiff barrier does not ring, is applied by backward Euler
     along the normal, with the blade's effective mass ``m`` there and the coupling's push predicted
     from the current state: with ``s = K_ex h + c_ex``,
@@ -338,44 +346,52 @@ def _normal_force(blade: tuple, hand: tuple, cx: Any, cy: Any, dist: Any, touchi
     coupling's acceleration of that point into the tongue. At rest ``a = P / m``, so a held press
     settles exactly on the law, however stiff it is there; the prediction uses forces of this instant
     (not the last contact force), so it does not feed energy back.
+
+    **Lateral**: the blade's lateral mass between the hand's spring-damper and the tongue's
+    stick-slip grip, as pymunk integrates its springs: explicit springs, implicit damping, then the
+    position (symplectic Euler; stable for ``omega h < 2``, which the substep keeps below 0.3).
     """
     px, py, a, cos_a, sin_a, vx, vy, w = blade
-    depth = c.R - dist
-    nx = cx / dist
-    ny = cy / dist
-    rx = cx - px
-    ry = cy - py
-    approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)     # speed of that point into the tongue
-    rn = rx * ny - ry * nx
-    inv_meff = c.inv_m + rn * rn * c.inv_I
-    i = ops.index(ops.positive(depth) * c.inv_step, c.top)
-    slope = ops.take(slopes, i)
-    law = ops.take(loads, i) + (depth - i * c.step) * slope
-    ahead = ops.take(slopes, ops.index(ops.positive(depth + c.h * approach) * c.inv_step, c.top))
-    slope = ops.where(ahead > slope, ahead, slope)
-    excess = ops.positive(slope - c.k_ref)
-    # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
-    stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
-    # within the explicit range (stiff = 0) the prediction adds exactly 0: skip it there
-    push = _coupling_push_where(stiff, blade, hand, nx, ny, rn, c, ops)
-    beta = stiff * c.h * inv_meff
-    P = ops.positive((law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)) * touching
-    fx = P * nx
-    fy = P * ny
-    return fx, fy, rx * fy - ry * fx, P
-
-
-def _coupling_push_where(stiff: Any, blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants,
-                         ops: Any) -> Any:
-    """:func:`_coupling_push` where ``stiff > 0``, 0 elsewhere (where it is multiplied by 0 anyway)."""
-    if ops is ScalarOps:
-        return 0.0 if stiff == 0.0 else _coupling_push(blade, hand, nx, ny, rn, c)
-    rows = np.flatnonzero(stiff > 0.0)
-    push = np.zeros(len(stiff))
-    if len(rows):
-        push[rows] = _coupling_push(tuple(v[rows] for v in blade), tuple(v[rows] for v in hand), nx[rows], ny[rows],
-                                    rn[rows], c)
-    return push
+    lat_y, lat_v, hand_lat, anchor = lateral
+    cx, cy, dist = _nearest_point(px, py, cos_a, sin_a, c, ops)
+    touching = dist < c.R
+    if ops is ScalarOps and not touching:       # off the tongue P is 0: the single device skips its arithmetic
+        fx = fy = torque = P = 0.0
+    else:
+        depth = c.R - dist
+        nx = cx / dist
+        ny = cy / dist
+        rx = cx - px
+        ry = cy - py
+        approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)     # speed of that point into the tongue
+        rn = rx * ny - ry * nx
+        inv_meff = c.inv_m + rn * rn * c.inv_I
+        i = ops.index(ops.positive(depth) * c.inv_step, c.top)
+        slope = ops.take(slopes, i)
+        law = ops.take(loads, i) + (depth - i * c.step) * slope
+        ahead = ops.take(slopes, ops.index(ops.positive(depth + c.h * approach) * c.inv_step, c.top))
+        slope = ops.where(ahead > slope, ahead, slope)
+        excess = ops.positive(slope - c.k_ref)
+        # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
+        stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
+        # the coupling's acceleration of the contact point into the tongue, predicted from this instant
+        # (where stiff = 0 it is multiplied by 0)
+        Fx, Fy, tau = _coupling_force(blade, hand, c)
+        push = -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
+        beta = stiff * c.h * inv_meff
+        P = ops.positive((law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)) * touching
+        fx = P * nx
+        fy = P * ny
+        torque = rx * fy - ry * fx
+    k_s = c.k_t * touching
+    lat_v = (lat_v + c.h_over_m * (c.k * (hand_lat - lat_y) + c.c * hl - k_s * (lat_y - anchor))) / \
+        (1.0 + c.h_over_m * c.c)
+    lat_y = lat_y + c.h * lat_v
+    stuck = k_s * (lat_y - anchor)
+    limit = c.mu * P
+    Q = ops.clip(stuck, -limit, limit)                         # Coulomb: past mu P the anchor slides
+    anchor = ops.where(touching, ops.where(Q != stuck, lat_y - Q / c.k_t, anchor), lat_y)
+    return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
 
 
 def _coupling_force(blade: tuple, hand: tuple, c: _Constants) -> tuple[Any, Any, Any]:
@@ -388,30 +404,6 @@ def _coupling_force(blade: tuple, hand: tuple, c: _Constants) -> tuple[Any, Any,
     Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
     Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
     return Fx, Fy, qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
-
-
-def _coupling_push(blade: tuple, hand: tuple, nx: Any, ny: Any, rn: Any, c: _Constants) -> Any:
-    """Acceleration (m/s^2) into the tongue that the coupling gives the blade's contact point now
-    (normal ``(nx, ny)``, lever ``rn``)."""
-    Fx, Fy, tau = _coupling_force(blade, hand, c)
-    return -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
-
-
-def _lateral_step(lat_y: Any, lat_v: Any, hand_lat: Any, hand_lat_v: Any, anchor: Any, P: Any, touching: Any,
-                  c: _Constants, ops: Any) -> tuple[Any, Any, Any, Any]:
-    """The blade's lateral mass between the hand's spring-damper and the tongue's stick-slip grip, as
-    pymunk integrates its springs: explicit springs, implicit damping, then the position (symplectic
-    Euler; stable for ``omega h < 2``, which the substep keeps below 0.3). Returns
-    ``(Q, lat_y, lat_v, anchor)``."""
-    k_s = c.k_t * touching
-    lat_v = (lat_v + c.h_over_m * (c.k * (hand_lat - lat_y) + c.c * hand_lat_v - k_s * (lat_y - anchor))) / \
-        (1.0 + c.h_over_m * c.c)
-    lat_y = lat_y + c.h * lat_v
-    stuck = k_s * (lat_y - anchor)
-    limit = c.mu * P
-    Q = ops.clip(stuck, -limit, limit)                         # Coulomb: past mu P the anchor slides
-    anchor = ops.where(touching, ops.where(Q != stuck, lat_y - Q / c.k_t, anchor), lat_y)
-    return Q, lat_y, lat_v, anchor
 
 
 def _near_walls(pose: tuple[float, ...], velocity: tuple[float, ...], low: tuple[float, ...],
@@ -663,6 +655,10 @@ class Laryngoscope(_DeviceBase):
         self._hand, self._blade = self._space.hands[0], self._space.blades[0]
         self._chand, self._cblade, self._cspace = self._hand._body, self._blade._body, self.space._space
         self._loads, self._slopes = contact.loads_list, contact.slopes_list
+        # the substep loop as plain float code for this scene, the contact's arithmetic inlined (the same
+        # bits as the loop run as written, with ScalarOps: tested)
+        self._loop = scalar_kernel(Laryngoscope._substep_loop, self.c,
+                                   helpers=(_tongue_substep, _nearest_point, _coupling_force))
         self._touched = False
         self._listen_to_incisors()
         self.reset()
@@ -703,7 +699,11 @@ class Laryngoscope(_DeviceBase):
         self.substeps(vX, vY, spin, v_lat, self.n_substeps)
 
     def substeps(self, vX: float, vY: float, spin: float, v_lat: float, count: int) -> None:
-        """``count`` physics substeps with the hand's commanded world velocities.
+        """``count`` physics substeps with the hand's commanded world velocities."""
+        self._loop(self, vX, vY, spin, v_lat, count)
+
+    def _substep_loop(self, vX: float, vY: float, spin: float, v_lat: float, count: int) -> None:
+        """:meth:`substeps` as written; ``__init__`` compiles it for the scene (:func:`scalar_kernel`).
 
         The loop talks to Chipmunk through pymunk's C bindings (``pymunk._chipmunk.lib``): pymunk's
         Python properties cost 1.5 us each, a tenth of a 1 kHz tick's budget. Away from the tongue it
@@ -713,11 +713,12 @@ class Laryngoscope(_DeviceBase):
         if self._touched:
             self._space.flush(0)
             self._touched = False
-        c, lo, hi, h, R = self.c, self.c.low, self.c.high, self.c.h, self.c.R
+        c, lo, hi, h = self.c, self.c.low, self.c.high, self.c.h
         blade, hand, space, step = self._cblade, self._chand, self._cspace, self._space.step
         get_p, get_v, get_a, get_w = _lib.cpBodyGetPosition, _lib.cpBodyGetVelocity, _lib.cpBodyGetAngle, \
             _lib.cpBodyGetAngularVelocity
         loads, slopes, cos, sin = self._loads, self._slopes, math.cos, math.sin
+        set_force, set_torque = _lib.cpBodySetForce, _lib.cpBodySetTorque
         lat_y, lat_v, hand_lat, anchor = self._lateral
         # the kinematic hand moves exactly as Chipmunk integrates it (p += (v + 0) h), so it is tracked
         # here rather than read back
@@ -748,16 +749,12 @@ class Laryngoscope(_DeviceBase):
                     hl = low if x < low else (high if x > high else x)
                 hand_lat = hand_lat + h * hl
                 ca, sa = cos(a), sin(a)
-                cx, cy, dist = _nearest_point(px, py, ca, sa, c, ScalarOps)
-                if dist < R:
-                    fx, fy, torque, P = _normal_force((px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw),
-                                                      cx, cy, dist, True, loads, slopes, c, ScalarOps)
-                    Q, lat_y, lat_v, anchor = _lateral_step(lat_y, lat_v, hand_lat, hl, anchor, P, True, c, ScalarOps)
-                    _lib.cpBodySetForce(blade, (fx, fy))
-                    _lib.cpBodySetTorque(blade, torque)
-                else:
-                    P = 0.0
-                    Q, lat_y, lat_v, anchor = _lateral_step(lat_y, lat_v, hand_lat, hl, anchor, P, False, c, ScalarOps)
+                fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue_substep(
+                    (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
+                    loads, slopes, c, ScalarOps)
+                if P != 0.0:                                # off the tongue Chipmunk's reset force of 0 stands
+                    set_force(blade, (fx, fy))
+                    set_torque(blade, torque)
                 if written != (hvx, hvy, hw):
                     written = (hvx, hvy, hw)
                     _lib.cpBodySetVelocity(hand, (hvx, hvy))
@@ -940,11 +937,9 @@ class LaryngoscopeBatch(_DeviceBase):
             hl = ArrayOps.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
             hand_lat = hand_lat + h * hl
             ca, sa = np.cos(a), np.sin(a)
-            cx, cy, dist = _nearest_point(px, py, ca, sa, c, ArrayOps)
-            touching = dist < c.R
-            fx, fy, torque, P = _normal_force((px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), cx, cy, dist,
-                                              touching, loads, slopes, c, ArrayOps)
-            Q, lat_y, lat_v, anchor = _lateral_step(lat_y, lat_v, hand_lat, hl, anchor, P, touching, c, ArrayOps)
+            fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue_substep(
+                (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
+                loads, slopes, c, ArrayOps)
             hands, blades = out[0:2 * self.n:2], out[1:2 * self.n:2]
             hands[:, 0], hands[:, 1], hands[:, 2] = hvx, hvy, hw
             blades[:, 0], blades[:, 1], blades[:, 2] = vx, vy, w
