@@ -559,6 +559,29 @@ class _DeviceBase:
         self.c = _constants(params, contact, self.h)
         self.n = n
         self._space = _Space(params, n)
+        self._forget()
+
+    def _forget(self) -> None:
+        """Drop what was derived from the bodies' state: it has just changed (substeps, a new state)."""
+        self._kin: Any = None
+        self._pull: Any = None
+
+    def _kinematics(self) -> Any:
+        """Blade x, y, angle, vx, vy, spin and hand x, y, pitch (local frame), read once per state."""
+        if self._kin is None:
+            self._kin = self._read_kinematics()
+        return self._kin
+
+    def _coupling_pull(self, ops: Any) -> tuple[Any, Any, Any, Any]:
+        """``(cos, sin)`` of the blade's angle and the coupling's force ``(Fx, Fy)`` on it now (the
+        clinical record and the haptic force both need them; computed once per state)."""
+        if self._pull is None:
+            x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
+            hvx, hvy, hw, _ = self._hand_v_state()
+            ca, sa = ops.cos(a), ops.sin(a)
+            Fx, Fy, _ = _coupling_force((x, y, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), self.c)
+            self._pull = (ca, sa, Fx, Fy)
+        return self._pull
 
     @property
     def space(self) -> pymunk.Space:
@@ -595,9 +618,8 @@ class _DeviceBase:
         c = self.c
         x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
         hand_lat = self._lateral_state()[2]
-        hvx, hvy, hw, _ = self._hand_v_state()
-        ca, sa = ops.cos(a), ops.sin(a)
-        Fx, Fy, _ = _coupling_force((x, y, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), c)
+        hw = self._hand_v_state()[2]
+        ca, sa, Fx, Fy = self._coupling_pull(ops)
         wrist = c.k_rot * (pitch - a) + c.c_rot * (hw - w)
         ix, iy = self.params.incisor_segment[0]
         qx = ca * c.grip[0] - sa * c.grip[1]
@@ -640,10 +662,9 @@ class _DeviceBase:
     def _rendered(self, ops: Any) -> tuple[Any, Any, Any]:
         """The coupling's pull on the hand (world x, y, z), as the preset renders it."""
         c = self.c
-        x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
         lat_y, lat_v, hand_lat, _ = self._lateral_state()
-        hvx, hvy, hw, hl = self._hand_v_state()
-        Fx, Fy, _ = _coupling_force((x, y, a, ops.cos(a), ops.sin(a), vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), c)
+        hl = self._hand_v_state()[3]
+        Fx, Fy = self._coupling_pull(ops)[2:]
         return render_components(-Fx, c.k * (lat_y - hand_lat) + c.c * (lat_v - hl), -Fy, c.k, self.params.haptic, ops)
 
 
@@ -768,6 +789,7 @@ class Laryngoscope(_DeviceBase):
         self._hand_v = (hvx, hvy, hw, hl)
         self._contact = (P, Q, cx, cy)
         self._incisor = self._impulse / (count * h)
+        self._forget()
 
     def features(self) -> list[float] | None:
         """Force features of the contact, or None without contact."""
@@ -844,8 +866,7 @@ class Laryngoscope(_DeviceBase):
         x, y, a = self._kinematics()[:3]
         return np.array([[x, y, a, self._lateral[0]]])
 
-    def _kinematics(self) -> tuple[float, ...]:
-        """Blade x, y, angle, vx, vy, spin and hand x, y, pitch (local frame)."""
+    def _read_kinematics(self) -> tuple[float, ...]:
         b = self._cblade
         p, v = _lib.cpBodyGetPosition(b), _lib.cpBodyGetVelocity(b)
         return (p.x, p.y, _lib.cpBodyGetAngle(b), v.x, v.y, _lib.cpBodyGetAngularVelocity(b), *self._hand_pose)
@@ -871,6 +892,7 @@ class Laryngoscope(_DeviceBase):
         self._contact, self._incisor, self._touched = (P, Q, cx, cy), incisor, False     # place() flushed
         self._hand_v = tuple(s.hand_velocity[0].tolist())
         self._impulse = 0.0
+        self._forget()
 
 
 class LaryngoscopeBatch(_DeviceBase):
@@ -951,6 +973,7 @@ class LaryngoscopeBatch(_DeviceBase):
         self._hand_v = np.stack([hvx, hvy, hw, hl], axis=1)
         self._contact = np.stack([P, Q, cx, cy], axis=1)
         self._incisor = impulse / (count * h)
+        self._forget()
 
     def _add_incisor_impulses(self, impulse: np.ndarray) -> None:
         """Add ``|total_impulse|`` of this substep's contact with the incisors to each device's sum (one
@@ -1008,7 +1031,7 @@ class LaryngoscopeBatch(_DeviceBase):
     def hand_velocity(self) -> np.ndarray:
         return self._hand_v.copy()
 
-    def _kinematics(self) -> np.ndarray:
+    def _read_kinematics(self) -> np.ndarray:
         """``(9, n)``: blade x, y, angle, vx, vy, spin and hand x, y, pitch (local frame)."""
         bodies = self._bodies()
         return np.concatenate([bodies[:, 1].T, bodies[:, 0, :3].T])
@@ -1035,3 +1058,4 @@ class LaryngoscopeBatch(_DeviceBase):
         self._incisor[idx] = s.contact[src, 4]
         self._touched[idx] = False                         # place() flushed them
         self._hand_v[idx] = s.hand_velocity[src]
+        self._forget()

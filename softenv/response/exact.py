@@ -162,15 +162,19 @@ class TabulatedResponse(ResponseModel):
         result equals ``lookup`` bit for bit, without numpy's per-call cost on tiny arrays.
         """
         base = 0
-        weights = [1.0]
-        for j, (xj, lo, inv, stride) in enumerate(zip(x, self._low_list, self._inv_list, self._stride_list)):
+        pairs = []
+        for xj, lo, inv, stride in zip(x, self._low_list, self._inv_list, self._stride_list):
             t = (xj - lo) * inv
-            cell = max(math.floor(t), 0)
+            cell = math.floor(t)
+            if cell < 0:
+                cell = 0
             frac = t - cell
             base += cell * stride
-            pair = (1.0 - frac, frac)
-            weights = list(pair) if j == 0 else [w * p for w in weights for p in pair]
-        rows = self._flat.take(self._offsets + base, axis=0)
+            pairs.append((1.0 - frac, frac))
+        weights = pairs[0]
+        for pair in pairs[1:]:
+            weights = [w * p for w in weights for p in pair]
+        rows = self._flat[base:].take(self._offsets, axis=0)      # the corners' rows, from the base corner's
         return np.dot(np.array(weights), rows)          # the same BLAS vector-matrix kernel as lookup's matmul
 
     def _state(self) -> dict[str, np.ndarray]:
