@@ -10,12 +10,15 @@ syntax tree, into the code a person would write by hand for floats:
   :class:`ScalarOps` evaluates (each argument evaluated once), ``ops.sqrt`` and the other ``math``
   functions -> those functions; so the kernel computes the same IEEE operations in the same order as
   the function called with ``ScalarOps``, and returns the same bits (tested);
-* ``c.name`` -> a constant bound in the kernel's closure (``c`` is the constants parameter);
+* ``c.name`` -> a constant bound in the kernel's closure (``c`` names the constants: a parameter,
+  or a local the function assigns them to);
 * ``ops is ScalarOps`` -> ``True``;
-* a statement ``a, b = helper(...)`` calling one of the listed helpers -> the helper's body, its
-  locals renamed, its parameters replaced by the call's arguments.
+* a statement ``a, b = helper(...)`` calling one of the listed helpers (functions of the same
+  module) -> the helper's body, its locals renamed, its parameters replaced by the call's arguments.
 
-The kernel keeps the function's signature (``c`` and ``ops`` are accepted and ignored).
+The kernel keeps the function's signature (``c`` and ``ops`` are accepted and ignored) and runs in its
+module's globals. The ops' arguments must be free of side effects, as arithmetic is: one that the float
+form does not need (the unselected branch of ``where``) is not evaluated.
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ from typing import Any
 
 from ._ops import ScalarOps
 
-# ops.f(args) -> an expression of the argument names a, b, c, each bound once
+# ops.f(args) -> an expression of the argument names a, b, c; an argument read more than once is
+# bound by := at its first read, which every later read follows in evaluation order
 _OPS = {
     "positive": (1, "(a if a > 0.0 else 0.0)"),
     "clip": (3, "(b if a < b else (c if a > c else a))"),
@@ -65,6 +69,10 @@ def _compile(fn: Callable[..., Any], helpers: tuple[Callable[..., Any], ...],
              constants_arg: str) -> tuple[Callable[..., Any], tuple[str, ...], tuple[str, ...]]:
     """The kernel's factory ((constants, math functions) -> kernel) and the names of its arguments."""
     kernel = _function_def(fn)
+    foreign = [h.__qualname__ for h in helpers if h.__globals__ is not fn.__globals__]
+    if foreign:
+        raise ValueError(f"scalar_kernel: helpers {foreign} are not in {fn.__qualname__}'s module, whose globals "
+                         "the kernel sees")
     kernel.body = _Inliner({h.__name__: _function_def(h) for h in helpers}).statements(kernel.body)
     rewriter = _Rewriter(constants_arg)
     kernel = rewriter.visit(kernel)

@@ -135,6 +135,7 @@ def enclosed() -> Any:
     (uses_assigns_parameter, (assigns_parameter,), "assigns_parameter: it assigns to its parameter x"),
     (uses_stack, (), "ops.stack has no float form"),
     (enclosed(), (), "not a plain function of its module"),
+    (arithmetic, (ScalarOps.positive,), "not in arithmetic's module"),
 ])
 def test_what_it_cannot_compile_is_refused_by_name(fn: Any, helpers: tuple, message: str) -> None:
     with pytest.raises(ValueError, match=message):

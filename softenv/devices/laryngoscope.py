@@ -51,10 +51,12 @@ springs are stable up to ``omega h < 2``), where ``omega_max`` is the stiffest m
 all its springs (coupling, rotary coupling, and the tongue contact's explicit part wherever on the
 underside it acts: the design force's stiffness, capped where it would add substeps), or of the lateral sweep (:meth:`LaryngoscopeParams.omega_max`).
 
-Two implementations share the arithmetic (:func:`_tongue_substep`): :class:`Laryngoscope` steps one
-device with Python floats and pymunk's attributes (the single env: a 1 kHz tick in microseconds),
-:class:`LaryngoscopeBatch` steps ``N`` devices in one pymunk space with numpy and ``pymunk.batch``.
-Both compute the same IEEE operations in the same order. In the batch, device ``i`` sits at its own
+Two implementations share the contact's arithmetic (:func:`_tongue_substep`, written once against
+``ops``): :class:`Laryngoscope` steps one device with Python floats and pymunk's C functions (the single
+env: a 1 kHz tick in microseconds; its substep loop is compiled per scene into plain float code by
+:func:`softenv._specialise.scalar_kernel`, the same operations without a Python call per ``ops``
+function), :class:`LaryngoscopeBatch` steps ``N`` devices in one pymunk space with numpy and
+``pymunk.batch``. Both compute the same IEEE operations in the same order. In the batch, device ``i`` sits at its own
 place in the plane (a grid 1 m apart, so no shapes of two devices ever meet): positions there carry
 the offset, which changes their rounding, so device 0 (at the origin) equals a single device bit for
 bit and the others agree to rounding (tested).
@@ -327,8 +329,8 @@ def _nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: _Constants, ops:
 
 def _tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: _Constants,
                     ops: Any) -> tuple[Any, ...]:
-    """One substep of the tongue's contact, all its arithmetic in one frame (a substep's budget is a
-    few microseconds; each Python call in the scalar path costs a tenth of one).
+    """One substep of the tongue's contact: the arithmetic both devices share (the single device runs
+    it inlined into its compiled substep loop).
 
     ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
     ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
