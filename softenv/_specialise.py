@@ -17,7 +17,9 @@ syntax tree, into the code a person would write by hand for floats:
   module) -> the helper's body, its locals renamed, its parameters replaced by the call's arguments.
 
 The kernel keeps the function's signature (``c`` and ``ops`` are accepted and ignored) and runs in its
-module's globals. The ops' arguments must be free of side effects, as arithmetic is: one that the float
+module's globals. Where the source cannot be read (an app frozen without its ``.py`` files), the
+function itself is returned: callers pass ``c`` and ``ops`` anyway, so the results are the same, at
+the plain speed. The ops' arguments must be free of side effects, as arithmetic is: one that the float
 form does not need (the unselected branch of ``where``) is not evaluated.
 """
 
@@ -51,7 +53,10 @@ def scalar_kernel(fn: Callable[..., Any], constants: Any, helpers: tuple[Callabl
                   constants_arg: str = "c") -> Callable[..., Any]:
     """``fn`` specialised to Python floats, with the attributes of ``constants`` (read by ``fn`` and
     the inlined ``helpers`` as ``c.name``) bound as constants."""
-    bind, names, maths = _compile(fn, helpers, constants_arg)
+    try:
+        bind, names, maths = _compile(fn, helpers, constants_arg)
+    except OSError:                              # no source to read: run the function as written
+        return fn
     return bind(*(getattr(constants, name) for name in names), *(getattr(ScalarOps, name) for name in maths))
 
 

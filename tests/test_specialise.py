@@ -140,3 +140,19 @@ def enclosed() -> Any:
 def test_what_it_cannot_compile_is_refused_by_name(fn: Any, helpers: tuple, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         scalar_kernel(fn, Constants(1.0, 1, (0.0, 0.0)), helpers=helpers)
+
+
+def test_without_source_the_function_itself_serves(monkeypatch: pytest.MonkeyPatch) -> None:
+    import inspect
+
+    import softenv._specialise as specialise
+
+    def no_source(obj: Any) -> str:
+        raise OSError("could not get source code")
+
+    monkeypatch.setattr(inspect, "getsource", no_source)
+    specialise._compile.cache_clear()
+    try:
+        assert scalar_kernel(arithmetic, Constants(1.0, 3, (0.0, 0.0)), helpers=(lever,)) is arithmetic
+    finally:
+        specialise._compile.cache_clear()
