@@ -41,17 +41,19 @@ def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
                     t.p99 * 1e6, "us (p99)", f"median {t.median * 1e6:.1f} us, {loop.device.n_substeps} substeps",
                     "p99 <= 100 us", t.p99 <= 100e-6))
     cart = 1.0 / reference.median
-    dt = gym.make(ENV_ID).unwrapped.world.config["dynamics"]["dt"]
     rng = np.random.default_rng(0)
     steps = 1000 if quick else 5000
-    for label, actions in (("random actions", rng.uniform(-1, 1, (4096, 4)).astype(np.float32)),
-                           ("pressing actions", press_actions(rng, (4096, 4)))):
-        env = gym.make(ENV_ID)
-        t = gym_step_timing(env, list(actions), steps)
-        realtime = dt / t.median
-        rows.append(Row("haptic", f"{ENV_ID}: single env, simulated s per wall s ({label}, resets included)", realtime,
-                        "x real time", f"{1 / t.median:,.0f} steps/s = {1 / t.median / cart:.3f} x CartPole-v1; IQR "
-                        f"{dt / t.p75:.0f}-{dt / t.p25:.0f}x", ">= 100x", realtime >= 100))
+    action_sets = (("random actions", rng.uniform(-1, 1, (4096, 4)).astype(np.float32)),
+                   ("pressing actions", press_actions(rng, (4096, 4))))
+    for env_id in HAPTIC_SCENES:
+        dt = gym.make(env_id).unwrapped.world.config["dynamics"]["dt"]
+        for label, actions in action_sets:
+            env = gym.make(env_id)
+            t = gym_step_timing(env, list(actions), steps)
+            realtime = dt / t.median
+            rows.append(Row("haptic", f"{env_id}: single env, simulated s per wall s ({label}, resets included)",
+                            realtime, "x real time", f"{1 / t.median:,.0f} steps/s = {1 / t.median / cart:.3f} x "
+                            f"CartPole-v1; IQR {dt / t.p75:.0f}-{dt / t.p25:.0f}x", ">= 100x", realtime >= 100))
     env = gym.make(ENV_ID)
     r = measure(lambda: env.reset(), number=50 if quick else 200, repeats=5)
     rows.append(Row("haptic", f"{ENV_ID}: reset", r.median * 1e6, "us", spread_us(r)))
