@@ -396,13 +396,17 @@ def _tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: A
     return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
 
 
+def _grip_offset(cos_a: Any, sin_a: Any, c: _Constants) -> tuple[Any, Any]:
+    """The grip's offset (m) from the blade's centre of mass, in the world frame."""
+    return cos_a * c.grip[0] - sin_a * c.grip[1], sin_a * c.grip[0] + cos_a * c.grip[1]
+
+
 def _coupling_force(blade: tuple, hand: tuple, c: _Constants) -> tuple[Any, Any, Any]:
     """The coupling's force ``(Fx, Fy)`` and torque on the blade now: the hand's springs at the grip
     and the wrist spring, each with its damper (the hand feels the opposite)."""
     px, py, a, cos_a, sin_a, vx, vy, w = blade
     gx, gy, pitch, hvx, hvy, hw = hand
-    qx = cos_a * c.grip[0] - sin_a * c.grip[1]
-    qy = sin_a * c.grip[0] + cos_a * c.grip[1]
+    qx, qy = _grip_offset(cos_a, sin_a, c)
     Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
     Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
     return Fx, Fy, qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
@@ -624,8 +628,7 @@ class _DeviceBase:
         ca, sa, Fx, Fy = self._coupling_pull(ops)
         wrist = c.k_rot * (pitch - a) + c.c_rot * (hw - w)
         ix, iy = self.params.incisor_segment[0]
-        qx = ca * c.grip[0] - sa * c.grip[1]
-        qy = sa * c.grip[0] + ca * c.grip[1]
+        qx, qy = _grip_offset(ca, sa, c)
         lift = (x + qx - ix) * Fy - (y + qy - iy) * Fx
         return self.tongue_force, self.incisor_force, gx, gy, hand_lat, wrist, lift
 
@@ -681,7 +684,7 @@ class Laryngoscope(_DeviceBase):
         # the substep loop as plain float code for this scene, the contact's arithmetic inlined (the same
         # bits as the loop run as written, with ScalarOps: tested)
         self._loop = scalar_kernel(Laryngoscope._substep_loop, self.c,
-                                   helpers=(_tongue_substep, _nearest_point, _coupling_force))
+                                   helpers=(_tongue_substep, _nearest_point, _coupling_force, _grip_offset))
         self._touched = False
         self._listen_to_incisors()
         self.reset()
