@@ -246,7 +246,7 @@ def test_bad_batched_action_names_the_env(env_id):
     venv.reset(seed=0)
     actions = np.zeros((3, 4), np.float32)
     actions[2, 1] = np.nan
-    with pytest.raises(ValueError, match=r"actions\[2, 1\]"):
+    with pytest.raises(ValueError, match=r"actions\[2, 1\] = nan:"):
         venv.step(actions)
     with pytest.raises(ValueError, match="shape"):
         venv.step(np.zeros((2, 4), np.float32))

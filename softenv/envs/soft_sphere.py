@@ -526,7 +526,7 @@ def _check_actions(actions: Any, n: int) -> np.ndarray:
     bad = ~((a >= -1.0) & (a <= 1.0))
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise ValueError(f"actions[{i}, {j}] = {a[i, j]!r}: actions must be finite and within [-1, 1]")
+        raise ValueError(f"actions[{i}, {j}] = {float(a[i, j])!r}: actions must be finite and within [-1, 1]")
     return a
 
 
