@@ -579,8 +579,11 @@ def _add_masked(infos: dict[str, Any], values: dict[str, np.ndarray], mask: np.n
             if present.any():
                 infos[key], infos[f"_{key}"] = _nested(value, present), present
             continue
-        rows = mask.reshape(mask.shape + (1,) * (np.ndim(value) - 1))      # per-env vectors: mask each row
-        infos[key] = value.copy() if everyone else np.where(rows, value, np.zeros((), dtype=value.dtype))
+        if everyone:
+            infos[key] = value.copy()
+        else:
+            rows = mask.reshape(mask.shape + (1,) * (value.ndim - 1))       # per-env vectors: mask each row
+            infos[key] = np.where(rows, value, np.zeros((), dtype=value.dtype))
         infos[f"_{key}"] = mask.copy()
 
 
