@@ -98,12 +98,13 @@ class TabulatedResponse(ResponseModel):
         padded = np.pad(values, [(0, 1)] * d + [(0, 0)], mode="edge")
         self._flat = np.ascontiguousarray(padded.reshape(-1, values.shape[-1]))
         strides = np.cumprod([1, *np.array(padded.shape[:-1])[::-1][:-1]])[::-1]
-        self._strides = strides.astype(np.int64)
         self._strides_f = strides.astype(np.float64)
-        self._bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
-        self._offsets = self._bits @ self._strides
+        # corner c of a cell has bit j of c (the first axis the highest bit) as its offset along axis j
+        bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
+        self._offsets = bits @ strides.astype(np.int64)
+        self._low_col, self._inv_col = self.low_[:, None], self.inv_step_[:, None]
         self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
-        self._stride_list, self._bits_list = self._strides.tolist(), self._bits.tolist()
+        self._stride_list = strides.astype(np.int64).tolist()
 
     @property
     def nodes(self) -> tuple[int, ...]:
@@ -136,19 +137,20 @@ class TabulatedResponse(ResponseModel):
         return out
 
     def _lookup(self, x: np.ndarray) -> np.ndarray:
-        t = (x - self.low_) * self.inv_step_
+        n = len(x)
+        # axis by axis over all points, (d, N): the weights' products then run over long rows
+        t = (x.T - self._low_col) * self._inv_col
         # a point a rounding error below the box (a force of -1 in action units) stays in the first cell:
         # its fraction is then a hair below 0, a linear extrapolation of 1e-16 (a negative index would wrap)
         cell = np.maximum(np.floor(t), 0.0)
         frac = t - cell
-        g = np.stack([1.0 - frac, frac], axis=-1)                  # (N, d, 2)
-        w = g[:, 0, self._bits[:, 0]]
-        for j in range(1, x.shape[1]):                            # same order as lookup_one
-            w = w * g[:, j, self._bits[:, j]]
-        base = (cell @ self._strides_f).astype(np.int64)
+        w = np.stack([1.0 - frac[0], frac[0]])
+        for f in frac[1:]:          # (2^j, N) -> (2^(j+1), N): the same left-to-right products as lookup_one
+            w = (w[:, None] * np.stack([1.0 - f, f])).reshape(-1, n)
+        base = (self._strides_f @ cell).astype(np.int64)
         # take on the contiguous table copies whole rows: 1.3x faster than fancy indexing (as lookup_one)
         rows = self._flat.take(base[:, None] + self._offsets, axis=0)          # (N, 2^d, k)
-        return np.matmul(w[:, None, :], rows)[:, 0]
+        return np.matmul(np.ascontiguousarray(w.T)[:, None, :], rows)[:, 0]
 
     def lookup_one(self, x: Sequence[float]) -> np.ndarray:
         """Interpolate at one point given as Python floats: the scalar twin of :meth:`lookup`.
