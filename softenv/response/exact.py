@@ -97,14 +97,14 @@ class TabulatedResponse(ResponseModel):
         # pad one node per axis (a copy of the last) so a point on the upper face needs no clamping
         padded = np.pad(values, [(0, 1)] * d + [(0, 0)], mode="edge")
         self._flat = np.ascontiguousarray(padded.reshape(-1, values.shape[-1]))
-        strides = np.cumprod([1, *np.array(padded.shape[:-1])[::-1][:-1]])[::-1]
+        strides = np.cumprod([1, *np.array(padded.shape[:-1])[::-1][:-1]])[::-1].astype(np.int64)
         self._strides_f = strides.astype(np.float64)
         # corner c of a cell has bit j of c (the first axis the highest bit) as its offset along axis j
         self._bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
-        self._offsets = self._bits @ strides.astype(np.int64)      # (the torch twin reads both)
+        self._offsets = self._bits @ strides      # (the torch twin reads both)
         self._low_col, self._inv_col = self.low_[:, None], self.inv_step_[:, None]
         self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
-        self._stride_list = strides.astype(np.int64).tolist()
+        self._stride_list = strides.tolist()
 
     @property
     def nodes(self) -> tuple[int, ...]:
