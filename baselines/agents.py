@@ -82,7 +82,11 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
                 progress: bool = True, eval_episodes: int = 20, resume: bool = True) -> Path:
-    """Train (or resume) one agent; returns the path of the final model (``model.zip``)."""
+    """Train (or resume) one agent; returns the path of the final model (``model.zip``).
+
+    A run that finds checkpoints in ``out_dir`` (and no final model) resumes from the last one; its
+    ``agent.json`` lists the env steps it resumed at (``resumed_at``), because a resumed run is not
+    bit for bit the same as one that ran through."""
     import stable_baselines3 as sb3
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
     from stable_baselines3.common.logger import configure
@@ -110,13 +114,20 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
 
         params["action_noise"] = NormalActionNoise(np.zeros(4), noise_std * np.ones(4))
     checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
+    resumes = out / "checkpoints" / "resumed_at.json"
     if checkpoints and resume:
         model = cls.load(checkpoints[-1], env=env, device="cpu")
         buffer = checkpoints[-1].with_name(checkpoints[-1].stem.replace("agent_", "agent_replay_buffer_") + ".pkl")
         if buffer.exists() and hasattr(model, "load_replay_buffer"):
             model.load_replay_buffer(buffer)
+        # a checkpoint keeps the model and replay buffer, not the envs' mid-episode states or the random
+        # streams, so a resumed run is not bit for bit the run that was not stopped: it is recorded
+        resumed_at = [*(json.loads(resumes.read_text()) if resumes.exists() else []), int(model.num_timesteps)]
+        resumes.write_text(json.dumps(resumed_at))
     else:
         model = cls(params.pop("policy"), env, seed=seed, device="cpu", verbose=0, **params)
+        resumed_at = []
+        resumes.unlink(missing_ok=True)
     formats = ["csv"]
     try:
         import tensorboard  # noqa: F401
@@ -136,7 +147,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
                 reset_num_timesteps=False)
     model.save(final)
     meta = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-            **_layout(algo, scene)}
+            "resumed_at": resumed_at, **_layout(algo, scene)}
     (out / "agent.json").write_text(json.dumps(meta, indent=2))
     env.close()
     eval_env.close()
@@ -163,11 +174,15 @@ def load_agent(path: str | Path, scene: str) -> SB3Policy:
         if meta.get(key) != wanted[key]:
             raise ValueError(f"agent {str(path)!r} was trained for scene {meta.get('scene')!r} "
                              f"({key}={meta.get(key)!r}); asked for scene {scene!r} ({key}={wanted[key]!r})")
+    resumed_at = meta.get("resumed_at", [])       # absent in files written before it was recorded
+    if not (isinstance(resumed_at, list) and all(type(step) is int for step in resumed_at)):
+        raise ValueError(f"{str(meta_path)!r}: resumed_at={resumed_at!r}; expected a list of env steps (ints)")
     # HER's replay buffer needs an env to rebuild itself, even for inference
     env = make_training_env(algo, scene, 1, split="test") if algo == "sac-her" else None
     model = getattr(sb3, ALGOS[algo][0]).load(path, env=env, device="cpu")
     policy = SB3Policy(model, algo)
     policy.obs_mode = wanted["obs_mode"]
+    policy.resumed_at = resumed_at
     return policy
 
 

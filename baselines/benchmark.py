@@ -128,23 +128,27 @@ def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
     return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes)
 
 
-def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
-              episodes: int) -> tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]:
+AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None, list[int]]
+
+
+def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
     """Train (or resume) one agent and evaluate it; also returns its learning curve (test-target
-    return against env steps), so the driver needs no access to the worker's files."""
+    return against env steps) and the env steps its training resumed at, so the driver needs no
+    access to the worker's files."""
     _torch_single_thread()
     path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
-    episodes_ = evaluate(load_agent(path, scene), scene, episodes)
+    agent = load_agent(path, scene)
+    episodes_ = evaluate(agent, scene, episodes)
     log = Path(run_dir) / "eval" / "evaluations.npz"
     curve = None
     if log.exists():
         with np.load(log, allow_pickle=False) as data:
             curve = (data["timesteps"], data["results"].mean(axis=1))
-    return episodes_, curve
+    return episodes_, curve, agent.resumed_at
 
 
 def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
-                    episodes: int) -> tuple[Episodes, None]:
+                    episodes: int) -> AgentResult:
     """Train (or load) one ``ppo-torch`` agent (``baselines/ppo_torch.py``) on the GPU when there is one,
     else on CPU tensors, and evaluate it."""
     from . import ppo_torch
@@ -160,7 +164,7 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
         agent, _ = ppo_torch.train(args, log=lambda line: None)
         path.parent.mkdir(parents=True, exist_ok=True)
         ppo_torch.save(agent, args, path)
-    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
+    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None, []     # trained in one go, never resumed
 
 
 def torch_device() -> str:
@@ -206,19 +210,22 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             done = [r.value for r in runs if r.ok]
             if not done:
                 continue
-            curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
-            pooled = [e for e, _ in done]
+            curves[(scene, algo)] = [curve for _, curve, _ in done if curve is not None]
+            pooled = [e for e, _, _ in done]
+            resumed = [seed for seed, r in enumerate(runs) if r.ok and r.value[2]]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
             if algo == TORCH_PPO:
                 budget = plan.timesteps.get(algo) or _torch_ppo_budget()
-                kind = f"agent ({budget:,} steps, torch on {torch_device()})"
+                what = f"{budget:,} steps, torch on {torch_device()}"
             else:
                 budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
-                kind = f"agent ({budget:,} steps)"
-            summaries.append(_with(merged.summary(), kind=kind, seeds=len(done)))
+                what = f"{budget:,} steps"
+            if resumed:
+                what += f"; seed{'s' if len(resumed) > 1 else ''} {', '.join(map(str, resumed))} resumed"
+            summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done), resumed_seeds=resumed))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
     echo("")
@@ -350,7 +357,10 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           "oracle: on the ideal device the true response and creep planned ahead (`baselines.policies.PlanningOracle`), "
           "on the laryngoscope every episode planned through the device, contact and tissue by the cross-entropy "
           f"method from the scripted expert's actions (`baselines.planner.TrajectoryOracle`, {_oracle_text(plan)}; "
-          "its decision time is its planning time per control step). Decision time: one observation, median.\n",
+          "its decision time is its planning time per control step). Decision time: one observation, median."
+          + (" An agent whose kind names resumed seeds was trained in more than one sitting (resumed from its last "
+             "checkpoint; `agent.json` lists the steps in `resumed_at`): such a run is not bit for bit the run from "
+             "scratch." if any(s.get("resumed_seeds") for s in summaries) else "") + "\n",
           format_table(summaries), "",
           *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),

@@ -231,6 +231,7 @@ class SB3Policy:
     def __init__(self, model: Any, name: str) -> None:
         self.model = model
         self.name = name
+        self.resumed_at: list[int] = []            # env steps its training resumed at (agents.load_agent)
 
     def reset(self) -> None:
         pass

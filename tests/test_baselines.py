@@ -103,21 +103,51 @@ def test_agent_file_is_checked_against_the_scene(tmp_path):
     with pytest.raises(ValueError, match="trained for scene 'SoftSphere-v0'.*asked for scene 'SoftSphereViscoelastic-v0'"):
         load_agent(path, "SoftSphereViscoelastic-v0")
     meta = json.loads((tmp_path / "ppo" / "agent.json").read_text())
+    (tmp_path / "ppo" / "agent.json").write_text(json.dumps({**meta, "resumed_at": [100, "x"]}))
+    with pytest.raises(ValueError, match=r"resumed_at=\[100, 'x'\]; expected a list of env steps"):
+        load_agent(path, "SoftSphere-v0")
     meta["format_version"] = 99
     (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="format_version=99"):
         load_agent(path, "SoftSphere-v0")
 
 
-def test_training_resumes_from_its_last_checkpoint(tmp_path):
+def _last_checkpoint(out) -> int:
+    return max(int(p.stem.split("_")[1]) for p in out.glob("checkpoints/agent_*_steps.zip"))
+
+
+def test_training_resumes_from_its_last_checkpoint_and_records_it(tmp_path):
     out = tmp_path / "sac"
-    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
-    (out / "model.zip").unlink()
-    checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"))
-    assert checkpoints
+    resumed_at = lambda: json.loads((out / "agent.json").read_text())["resumed_at"]  # noqa: E731
+    path = train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
+    assert resumed_at() == []
+    path.unlink()
+    first = _last_checkpoint(out)
     train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1600, progress=False)
     log = (out / "logs" / "progress.csv").read_text().splitlines()
-    assert (out / "model.zip").exists() and len(log) > 1
+    assert path.exists() and len(log) > 1
+    assert resumed_at() == [first] and load_agent(path, "SoftSphere-v0").resumed_at == [first]
+    # stopped once more: both sittings are listed, in order
+    path.unlink()
+    second = _last_checkpoint(out)
+    assert second > first
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=2000, progress=False)
+    assert resumed_at() == [first, second]
+    # trained from scratch again: nothing was resumed
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False, resume=False)
+    assert resumed_at() == [] and not (out / "checkpoints" / "resumed_at.json").exists()
+
+
+def test_compare_names_the_agent_seeds_it_resumed(tmp_path):
+    plan = Plan(["SoftSphere-v0"], ["zero"], ["sac"], {"SoftSphere-v0": 2}, {"sac": 1100}, episodes=4)
+    quiet = lambda s: None  # noqa: E731
+    first = run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet, write=False)
+    assert first[1]["kind"] == "agent (1,100 steps)" and first[1]["resumed_seeds"] == []
+    (model,) = (tmp_path / "runs").glob("**/sac-1/model.zip")
+    model.unlink()                                # seed 1 stopped after its last checkpoint
+    again = run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet)
+    assert again[1]["kind"] == "agent (1,100 steps; seed 1 resumed)" and again[1]["resumed_seeds"] == [1]
+    assert "not bit for bit the run from scratch" in (tmp_path / "benchmark.md").read_text()
 
 
 def test_compare_writes_the_report_with_its_command(tmp_path):
