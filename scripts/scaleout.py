@@ -42,6 +42,16 @@ def cells(report: dict) -> str:
     return json.dumps([{k: v for k, v in s.items() if k != "decision_us"} for s in report["summaries"]], sort_keys=True)
 
 
+AGENTS = ("ppo", "sac", "td3", "sac-her")
+
+
+def job_seconds(report: dict) -> tuple[float, float]:
+    """The run's per-job wall times added up: agent jobs (training and evaluation), and all the others."""
+    timings = report["timings_s"]
+    agents = sum(t for key, t in timings.items() if key.rsplit(" ", 1)[-1] in AGENTS)
+    return agents, sum(timings.values()) - agents
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plan", choices=["quick", "full"], default="quick")
@@ -60,8 +70,14 @@ def main() -> None:
              f"{rep1['provenance']['machine']}; CartPole-v1 stepped at {cartpole:,.0f} steps/s during this run). The "
              f"{args.plan} plan: {len(rep1['summaries'])} table cells (policy x scene); every run starts "
              "from empty training runs, BLAS and torch on one thread per worker.\n",
-             "| executor | wall time (s) | against one process |", "|---|---|---|"]
-    lines += [f"| {how} | {wall:.0f} | {wall1 / wall:.2f}x |" for how, (wall, _) in results.items()]
+             "| executor | wall time (s) | against one process | agent jobs summed (s) | other jobs summed (s) |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {how} | {wall:.0f} | {wall1 / wall:.2f}x | {job_seconds(rep)[0]:.0f} | {job_seconds(rep)[1]:.0f} |"
+              for how, (wall, rep) in results.items()]
+    (agents1, others1), (agents2, others2) = job_seconds(rep1), job_seconds(rep2)
+    lines += ["", f"Run two at a time, the agent jobs took {agents2 / agents1:.2f}x their time in one process and the "
+              f"other jobs {others2 / others1:.2f}x: the factors that turn a two-worker run's summed job times into "
+              "an estimate of one process."]
     lines += ["", f"Ray's overhead over local workers: {wall_ray - wall2:+.0f} s ({100 * (wall_ray / wall2 - 1):+.0f} %): "
               "starting the local instance and shipping each job's code and result.", "",
               "Identical results (every table cell except the measured decision times):", "",
