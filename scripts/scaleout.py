@@ -42,12 +42,11 @@ def cells(report: dict) -> str:
     return json.dumps([{k: v for k, v in s.items() if k != "decision_us"} for s in report["summaries"]], sort_keys=True)
 
 
-AGENTS = ("ppo", "sac", "td3", "sac-her")
-
-
 def job_seconds(report: dict) -> tuple[float, float]:
     """The run's per-job wall times added up: agent jobs (training and evaluation), and all the others."""
-    timings = report["timings_s"]
+    from baselines.benchmark import AGENTS
+
+    timings = report["timings_s"]            # keyed "<scene> <policy>"; an agent's seeds are summed in one entry
     agents = sum(t for key, t in timings.items() if key.rsplit(" ", 1)[-1] in AGENTS)
     return agents, sum(timings.values()) - agents
 
@@ -72,8 +71,8 @@ def main() -> None:
              "from empty training runs, BLAS and torch on one thread per worker.\n",
              "| executor | wall time (s) | against one process | agent jobs summed (s) | other jobs summed (s) |",
              "|---|---|---|---|---|"]
-    lines += [f"| {how} | {wall:.0f} | {wall1 / wall:.2f}x | {job_seconds(rep)[0]:.0f} | {job_seconds(rep)[1]:.0f} |"
-              for how, (wall, rep) in results.items()]
+    lines += [f"| {how} | {wall:.0f} | {wall1 / wall:.2f}x | {agents:.0f} | {others:.0f} |"
+              for how, (wall, rep) in results.items() for agents, others in [job_seconds(rep)]]
     (agents1, others1), (agents2, others2) = job_seconds(rep1), job_seconds(rep2)
     lines += ["", f"Run two at a time, the agent jobs took {agents2 / agents1:.2f}x their time in one process and the "
               f"other jobs {others2 / others1:.2f}x: the factors that turn a two-worker run's summed job times into "
