@@ -10,6 +10,8 @@ import softenv  # noqa: E402,F401  (registers the ids)
 
 CASES = [("SoftSphere-v0", "next_step", "vector"), ("SoftSphereViscoelastic-v0", "same_step", "vector"),
          ("SoftSphereProcedure-v0", "same_step", "dict"), ("SoftSphere-v0", "next_step", "dict")]
+# a GPU, where the process has one, next to CPU tensors (the float64 references stay on the CPU)
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
 
 def _make(env_id, backend, **kwargs):
@@ -19,7 +21,7 @@ def _make(env_id, backend, **kwargs):
 
 def _close(a, b, rtol, atol=0.0):
     a = np.asarray(a, dtype=np.float64)
-    b = b.double().numpy() if isinstance(b, torch.Tensor) else np.asarray(b, dtype=np.float64)
+    b = b.double().cpu().numpy() if isinstance(b, torch.Tensor) else np.asarray(b, dtype=np.float64)
     np.testing.assert_allclose(b, a, rtol=rtol, atol=atol)
 
 
@@ -56,29 +58,31 @@ def test_float64_on_cpu_equals_the_numpy_twin_over_1000_steps(env_id, mode, obs_
     assert resets >= 10 * n * 0.9
 
 
+@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("env_id", ["SoftSphere-v0", "SoftSphereViscoelastic-v0", "SoftSphereProcedure-v0"])
-def test_float32_stays_within_1e5_of_the_float64_reference(env_id):
+def test_float32_stays_within_1e5_of_the_float64_reference(env_id, device):
     kwargs = {"num_envs": 8}
-    e64, e32 = _make(env_id, "torch", **kwargs), _make(env_id, "torch", dtype=torch.float32, **kwargs)
+    e64, e32 = _make(env_id, "torch", **kwargs), _make(env_id, "torch", dtype=torch.float32, device=device, **kwargs)
     e64.reset(seed=0)
     e32.reset(seed=0)
     generator = torch.Generator().manual_seed(0)
     for _ in range(300):
         a = torch.rand((8, 4), generator=generator) * 2 - 1
         o64, r64, _, _, i64 = e64.step(a)
-        o32, r32, _, _, i32 = e32.step(a)
-        assert r32.dtype == torch.float32
+        o32, r32, _, _, i32 = e32.step(a.to(device))
+        assert r32.dtype == torch.float32 and r32.device.type == device
         _close(r64, r32, rtol=1e-5, atol=1e-5)
         for key in ("shape_error_mm", "normalized_score", "force_N"):
             _close(i64[key], i32[key], rtol=1e-5, atol=1e-5)
         _close(o64, o32, rtol=0, atol=1e-5 * float(o64.abs().max()))
 
 
-def test_seeding_is_per_env_and_reproducible():
-    a = torch.as_tensor(np.random.default_rng(1).uniform(-1, 1, (50, 3, 4)), dtype=torch.float32)
+@pytest.mark.parametrize("device", DEVICES)
+def test_seeding_is_per_env_and_reproducible(device):
+    a = torch.as_tensor(np.random.default_rng(1).uniform(-1, 1, (50, 3, 4)), dtype=torch.float32, device=device)
     runs = []
     for seeds in ([5, 6, 7], 5, [9, 6, 7]):
-        env = _make("SoftSphere-v0", "torch", num_envs=3)
+        env = _make("SoftSphere-v0", "torch", num_envs=3, device=device)
         obs, _ = env.reset(seed=seeds)
         trace = [obs]
         for step in a:
@@ -178,14 +182,15 @@ def _splitmix64(seed, n):
     return z ^ (z >> 31)
 
 
-def test_the_device_generator_is_splitmix64():
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_device_generator_is_splitmix64(device):
     from softenv.envs.torch_parts import as_int64, episode_uniforms
 
     seeds = [0, 1, 12345, 2**63 - 1, 2**64 - 7]
     episodes = [0, 3, 2**40]
-    seed = torch.tensor([as_int64(s) for s in seeds for _ in episodes])
-    episode = torch.tensor([e for _ in seeds for e in episodes])
-    got = episode_uniforms(seed, episode, 5).numpy()
+    seed = torch.tensor([as_int64(s) for s in seeds for _ in episodes], device=device)
+    episode = torch.tensor([e for _ in seeds for e in episodes], device=device)
+    got = episode_uniforms(seed, episode, 5).cpu().numpy()
     want = [[(_splitmix64(s, 8 * e + j) >> 11) / 2.0**53 for j in range(1, 6)] for s in seeds for e in episodes]
     assert np.array_equal(got, np.array(want))
 

@@ -270,6 +270,10 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
     env = _torch_twin(n, device, dtype, draw)
     generator = torch.Generator(device=device).manual_seed(0)
     actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
+    if mode is not None:
+        # dynamo caches graphs per code object, not per env: without a reset a later size would run an
+        # earlier timing's graph, recompiled with dynamic shapes, so each figure would depend on the ones before
+        torch._dynamo.reset()
     step = env.step if mode is None else torch.compile(env.step, fullgraph=True, mode=mode)
     for i in range(env.unwrapped.world.horizon + 2):   # past the first episode starts: every graph compiled
         step(actions[i % len(actions)])
