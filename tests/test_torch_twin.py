@@ -258,6 +258,37 @@ def test_device_targets_cover_the_split_are_reproducible_and_move_on_at_autorese
 FORBIDDEN = {"item", "tolist", "nonzero", "__bool__", "numpy", "cpu"}   # host reads and dynamic shapes
 
 
+@pytest.mark.parametrize("draw", ["host", "device"])
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_the_state_is_written_in_place(mode, draw):
+    """A CUDA graph replays fixed addresses: every tensor the env holds must keep its storage through
+    steps, autoresets (with success termination too) and reset()."""
+    env = _make("SoftSphereViscoelastic-v0", "torch", num_envs=6, dtype=torch.float32, target_draw=draw,
+                autoreset_mode=mode, check_actions=False, task={"terminate_on_success": True})
+    twin = env.unwrapped
+    parts = [twin] + ([twin._episodes] if draw == "device" else [])    # the host draw rebuilds its episodes on the host
+
+    def storage():
+        return {(id(part), name): (value, value.data_ptr()) for part in parts
+                for name, value in vars(part).items() if isinstance(value, torch.Tensor)}
+
+    env.reset(seed=0)
+    before = storage()
+    assert len(before) >= (10 if draw == "host" else 20)
+    generator = torch.Generator().manual_seed(0)
+    ended = 0
+    for _ in range(2 * twin.world.horizon + 3):
+        _, _, terminated, truncated, _ = env.step(torch.rand((6, 4), generator=generator) * 2 - 1)
+        ended += int((terminated | truncated).sum())
+    env.reset()
+    after = storage()
+    assert ended >= 12                        # the envs went through autoresets
+    assert after.keys() == before.keys()
+    moved = [name for (part, name), (value, ptr) in before.items() if after[(part, name)][0] is not value
+             or after[(part, name)][1] != ptr]
+    assert moved == []
+
+
 @pytest.mark.parametrize("mode", ["same_step", "next_step"])
 def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
     """torch.compile(fullgraph=True) captures the whole step (no Python branch on a tensor's value, no

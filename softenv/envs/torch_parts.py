@@ -172,12 +172,12 @@ class DeviceEpisodes:
         device = self.seed.device
         fresh = torch.tensor([s is not None for s in seeds], device=device)
         given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=device)
-        self.seed = torch.where(fresh, given, self.seed)
-        self.episode = torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1)
+        keep(fresh, given, self.seed)
+        torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1, out=self.episode)
         self.seeded = True
         everyone = torch.ones(n, dtype=torch.bool, device=device)
         features = self.draw() if target is None else self.tensor(np.broadcast_to(target, (n, 4)))
-        self.features = features.to(self.features.dtype)
+        self.features.copy_(features)
         self._begin(everyone)
 
     def draw(self) -> torch.Tensor:
@@ -189,18 +189,18 @@ class DeviceEpisodes:
 
     def restart(self, mask: torch.Tensor) -> bool:
         """Start the masked envs' next episodes (for every env at once: no host read)."""
-        self.episode = self.episode + mask.to(torch.int64)
-        self.features = torch.where(mask[:, None], self.draw().to(self.features.dtype), self.features)
+        self.episode += mask.to(torch.int64)
+        keep(mask[:, None], self.draw().to(self.features.dtype), self.features)
         self._begin(mask)
         return True
 
     def _begin(self, mask: torch.Tensor) -> None:
         step0 = torch.zeros(len(mask), dtype=torch.int64, device=mask.device)
-        self.target = torch.where(mask[:, None], self.lookup(self._schedule(step0)), self.target)
+        keep(mask[:, None], self.lookup(self._schedule(step0)), self.target)
         zero = torch.zeros_like(self.zero_cum)
-        self.zero_cum = torch.where(mask, zero, self.zero_cum)
-        self.oracle_cum = torch.where(mask, zero, self.oracle_cum)
-        self.creep = torch.where(mask[:, None], self.b_rest, self.creep)
+        keep(mask, zero, self.zero_cum)
+        keep(mask, zero, self.oracle_cum)
+        keep(mask[:, None], self.b_rest, self.creep)
 
     def _schedule(self, step: torch.Tensor) -> torch.Tensor:
         if self.world.task_kind == "reach":
@@ -213,7 +213,7 @@ class DeviceEpisodes:
     def references(self, t: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """As :meth:`HostEpisodes.references`; the error sums of the stepped envs advance by this step."""
         w = self.world
-        target = self.target
+        target = self.target.clone()           # upcoming() overwrites self.target later in the step
         r = target - self.b_rest
         rr = torch.sum(r * r, dim=-1)
         sq_ref = torch.clamp(rr, min=w.floor_sq)
@@ -224,18 +224,24 @@ class DeviceEpisodes:
             creep = self.creep.clone()                      # step advances it in place
             d = dyn.step(creep, target) - target
             oracle_cum = oracle_cum + torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref).to(torch.float64)
-            self.creep = torch.where(stepped[:, None], creep, self.creep)
-        self.zero_cum = torch.where(stepped, zero_cum, self.zero_cum)
-        self.oracle_cum = torch.where(stepped, oracle_cum, self.oracle_cum)
+            keep(stepped[:, None], creep, self.creep)
+        keep(stepped, zero_cum, self.zero_cum)
+        keep(stepped, oracle_cum, self.oracle_cum)
         return target, sq_ref, zero_cum, oracle_cum
 
     def upcoming(self, t: torch.Tensor) -> torch.Tensor:
         if self.world.task_kind != "reach":     # the procedure's target moves: look up the next step's
-            self.target = self.lookup(self._schedule(torch.clamp(t, max=self.world.horizon - 1)))
+            self.target.copy_(self.lookup(self._schedule(torch.clamp(t, max=self.world.horizon - 1))))
         return self.target
 
     def first(self) -> torch.Tensor:
         return self.target               # right after _begin, the masked rows hold their first target
+
+
+def keep(mask: torch.Tensor, new: torch.Tensor, state: torch.Tensor) -> None:
+    """``state = where(mask, new, state)``, written into ``state``'s own storage. The env's state tensors
+    never move, so a captured CUDA graph, which replays fixed addresses, reads and writes the live state."""
+    torch.where(mask, new, state, out=state)
 
 
 def sum_dtype(name: str, dtype: torch.dtype | None) -> torch.dtype | None:

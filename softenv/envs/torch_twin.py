@@ -38,7 +38,7 @@ from gymnasium.vector.utils import batch_space
 from ..response import TabulatedResponse
 from .config import scene_config
 from .parts import reward_terms
-from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, sum_dtype
+from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, keep, sum_dtype
 from .world import World
 
 
@@ -115,6 +115,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
+        if self.device.type == "cuda":
+            # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
+            # so CUDA graphs (torch.compile mode="reduce-overhead") may replay on them, state writes included,
+            # without copying them in. (Only CUDA has graphs; importing torch._dynamo costs a second.)
+            for part in (self, self._episodes):
+                for value in vars(part).values():
+                    if isinstance(value, torch.Tensor):
+                        torch._dynamo.mark_static_address(value)
 
     def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device).to(dtype or self.dtype)
@@ -150,7 +158,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
         obs = self._restart_rows(obs, reset_now)
         _add_masked(infos, values, ~reset_now)
-        self._autoreset = terminated | truncated
+        self._autoreset.copy_(terminated | truncated)
         return obs, reward, terminated, truncated, infos
 
     # -- the step -------------------------------------------------------------------------------
@@ -202,14 +210,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         success = ratio < w.tolerance
         s = stepped
         rows = s[:, None]
-        self._z = torch.where(rows, z, self._z)
-        self._b = torch.where(rows, b, self._b)
-        self._prev = torch.where(rows, a, self._prev)
-        self._features = torch.where(rows, f, self._features)
-        self._agent_cum = torch.where(s, agent_cum, self._agent_cum)
-        self._peak = torch.where(s, peak, self._peak)
-        self._last_target = torch.where(rows, target, self._last_target)
-        self._t = self._t + s.to(torch.int64)
+        keep(rows, z, self._z)
+        keep(rows, b, self._b)
+        keep(rows, a, self._prev)
+        keep(rows, f, self._features)
+        keep(s, agent_cum, self._agent_cum)
+        keep(s, peak, self._peak)
+        keep(rows, target, self._last_target)
+        self._t += s.to(torch.int64)
         terminated = (success & w.terminate_on_success) & s
         truncated = (self._t >= H) & s
         values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
@@ -247,14 +255,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def _start(self, mask: torch.Tensor) -> None:
         rows = mask[:, None]
-        self._z = torch.where(rows, self._b_rest, self._z)
-        self._b = torch.where(rows, self._b_rest, self._b)
-        self._features = torch.where(rows, self._rest_features, self._features)
-        self._prev = torch.where(rows, self._rest_action, self._prev)
-        self._t = torch.where(mask, torch.zeros_like(self._t), self._t)
-        self._agent_cum = torch.where(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
-        self._peak = torch.where(mask, torch.zeros_like(self._peak), self._peak)
-        self._last_target = torch.where(rows, self._episodes.first(), self._last_target)
+        keep(rows, self._b_rest, self._z)
+        keep(rows, self._b_rest, self._b)
+        keep(rows, self._rest_features, self._features)
+        keep(rows, self._rest_action, self._prev)
+        keep(mask, torch.zeros_like(self._t), self._t)
+        keep(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
+        keep(mask, torch.zeros_like(self._peak), self._peak)
+        keep(rows, self._episodes.first(), self._last_target)
 
     def _episodes_may_start(self) -> bool:
         """Whether an env can start an episode this step. Without success termination every episode lasts
