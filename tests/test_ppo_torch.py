@@ -7,7 +7,7 @@ torch = pytest.importorskip("torch")
 
 from baselines.evaluate import evaluate, scene_kwargs  # noqa: E402
 from baselines.policies import make_baseline  # noqa: E402
-from baselines.ppo_torch import Args, TorchPolicy, load, save, train  # noqa: E402
+from baselines.ppo_torch import Args, TorchPolicy, load, main, save, train  # noqa: E402
 from softenv.envs.config import make_config  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 
@@ -78,3 +78,19 @@ def test_compare_runs_ppo_torch_on_the_ideal_scenes_and_says_where(tmp_path):
     assert torch.cuda.is_available() or any("no GPU in this process" in line for line in lines)
     haptic = Plan(["SoftSphereHaptic-v0"], [], ["ppo", "ppo-torch"], {"SoftSphereHaptic-v0": 1})
     assert scene_agents(haptic, "SoftSphereHaptic-v0") == ["ppo"]          # the torch twin has no laryngoscope
+
+
+def test_the_command_line_sets_the_batch_shape_and_reports_it(tmp_path):
+    report = tmp_path / "ppo.md"
+    main(["--seeds", "0", "--num-envs", "8", "--num-steps", "16", "--minibatch-size", "64", "--update-epochs", "1",
+          "--total-timesteps", "384", "--episodes", "3", "--report", str(report)])
+    text = report.read_text()
+    assert "--num-envs 8 --num-steps 16 --minibatch-size 64" in text       # the command, as typed
+    assert "| 0 | " in text and "| 384 |" in text                           # 3 rollouts of 8 envs x 16 steps
+
+
+@pytest.mark.parametrize("field,value", [("num_envs", 0), ("num_steps", -1), ("minibatch_size", 0),
+                                         ("update_epochs", 0), ("total_timesteps", 100)])
+def test_a_batch_shape_that_cannot_train_is_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=f"{field}={value}"):
+        train(Args(**{field: value}), log=lambda line: None)
