@@ -268,3 +268,11 @@ def test_planning_oracle_beats_holding_the_target_force_under_creep():
     hold = evaluate(InversionPolicy(world, world.response, "hold"), "SoftSphereViscoelastic-v0", episodes=10)
     assert (oracle.values["error_sum_mm"] < hold.values["error_sum_mm"]).all()
     assert oracle.values["normalized_score"].mean() > 105                 # on the env's hold-the-force scale
+
+
+def test_the_baselines_load_without_pymunk(heavy_modules_after):
+    """``softenv[rl]`` without the device extra: the baselines import neither pymunk (the laryngoscope's
+    observation scales live outside its module) nor torch; the torch PPO's driver (baselines/ppo_torch.py)
+    imports them, and on a machine without pymunk failed."""
+    code = "import baselines.benchmark, baselines.policies, baselines.evaluate, softenv.control\n"
+    assert heavy_modules_after(code) == []

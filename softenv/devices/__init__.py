@@ -14,6 +14,10 @@ laryngoscope never loads it.
 LARYNGOSCOPE_OBS = ("blade_x", "blade_z", "blade_pitch", "blade_y", "blade_vx", "blade_vz", "blade_spin", "blade_vy",
                     "hand_x", "hand_z", "hand_pitch", "hand_y", "tongue_normal", "tongue_sideways", "incisor")
 IDEAL_OBS = ("insertion", "lateral", "normal", "sideways")
+# scales of the laryngoscope's observation (value / scale, then squashed): here, not in the pymunk module,
+# so that readers of the observation (softenv.control, the baselines) load without pymunk
+POSITION_SCALE, ANGLE_SCALE, LATERAL_SCALE = 0.05, 0.5, 0.02             # m, rad, m
+SPEED_SCALE, SPIN_SCALE, LATERAL_SPEED_SCALE = 0.2, 2.0, 0.1             # m/s, rad/s, m/s
 
 
 def device_obs_names(kind: str) -> tuple[str, ...]:

@@ -84,6 +84,7 @@ except ImportError as exc:  # pragma: no cover - the device extra is part of eve
     raise ImportError("the simulated laryngoscope needs pymunk >= 7: pip install 'softenv[device]'") from exc
 
 from .._ops import ArrayOps, ScalarOps
+from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, SPEED_SCALE, SPIN_SCALE
 from .._specialise import scalar_kernel
 from .contact import TongueContact
 from .presets import PRESETS, HapticPreset, render_components
@@ -100,11 +101,9 @@ COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
 SOLVER_ITERATIONS = 3         # pymunk's contact solver (default 10): one contact a blade, warm-started over 20+ substeps
 CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
 ACCURACY = 0.3                # omega_max h
-# hand workspace around the start grip (m, m, rad) and scales of the observation (value / scale)
+# hand workspace around the start grip (m, m, rad)
 HAND_REACH = {"insert": 0.025, "withdraw": 0.05, "up": 0.04}   # further in, the handle would be in the mouth
 PITCH_LIMIT = 0.5
-POSITION_SCALE, ANGLE_SCALE, LATERAL_SCALE = 0.05, 0.5, 0.02
-SPEED_SCALE, SPIN_SCALE, LATERAL_SPEED_SCALE = 0.2, 2.0, 0.1
 
 
 @dataclass(frozen=True)
