@@ -290,6 +290,46 @@ def test_the_state_is_written_in_place(mode, draw):
 
 
 @pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_compile_options_compile_two_graphs_without_int_inputs(mode):
+    """``compile_options``: the env compiles its step's tensor work; the step count stays on the host, so
+    no graph takes an int input (CUDA graphs record a new graph for each value of one), at most two
+    graphs are made (episodes may start, or not), and they replay the eager env bit for bit, action
+    check included."""
+    graphs = []
+
+    def recorder(gm, example_inputs):
+        graphs.append(gm)
+        return gm.forward
+
+    def made(**kwargs):
+        env = _make("SoftSphereProcedure-v0", "torch", num_envs=4, target_draw="device", autoreset_mode=mode,
+                    max_episode_steps=3, dynamics={"kind": "viscoelastic"}, **kwargs)
+        env.reset(seed=0)
+        return env
+
+    torch._dynamo.reset()
+    compiled, eager = made(compile_options={"backend": recorder}), made()
+    actions = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (8, 4, 4)))
+    for a in actions:                                       # 8 steps: two autoresets of every env
+        got, want = compiled.step(a), eager.step(a)
+        assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1]) and torch.equal(got[3], want[3])
+        assert torch.equal(got[4]["normalized_score"], want[4]["normalized_score"])
+    assert len(graphs) == 2
+    inputs = [node.meta.get("example_value") for graph in graphs for node in graph.graph.nodes if node.op == "placeholder"]
+    assert inputs and all(isinstance(value, torch.Tensor) for value in inputs)
+    with pytest.raises(ValueError, match=r"actions\[1, 2\] = nan"):     # the check runs on the host, before the graph
+        compiled.step(torch.tensor([[0.0] * 4, [0.0, 0.0, float("nan"), 0.0]] + [[0.0] * 4] * 2))
+    torch._dynamo.reset()
+
+
+def test_compile_options_are_checked():
+    with pytest.raises(ValueError, match="compile_options=.*target_draw='device'.*'host'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, compile_options={"mode": "default"})
+    with pytest.raises(ValueError, match="compile_options='reduce-overhead' must be a dict"):
+        _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device", compile_options="reduce-overhead")
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
 def test_a_device_drawn_step_is_one_static_graph_without_host_reads(mode):
     """torch.compile(fullgraph=True) captures the whole step (no Python branch on a tensor's value, no
     data-dependent shape), the graphs read nothing back to the host, and they replay the eager env.

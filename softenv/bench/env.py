@@ -268,14 +268,20 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up)."""
     import torch
 
-    env = _torch_twin(n, device, dtype, draw)
-    generator = torch.Generator(device=device).manual_seed(0)
-    actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
     if mode is not None:
         # dynamo caches graphs per code object, not per env: without a reset a later size would run an
         # earlier timing's graph, recompiled with dynamic shapes, so each figure would depend on the ones before
         torch._dynamo.reset()
-    step = env.step if mode is None else torch.compile(env.step, fullgraph=True, mode=mode)
+    if mode == "reduce-overhead":
+        # CUDA graphs: the env compiles its own step (compile_options). Compiling env.step whole would make
+        # the host's step count an int input, and CUDA graphs record a new graph for each of its values.
+        env = _torch_twin(n, device, dtype, draw, compile_options={"mode": mode})
+        step = env.step
+    else:
+        env = _torch_twin(n, device, dtype, draw)
+        step = env.step if mode is None else torch.compile(env.step, fullgraph=True, mode=mode)
+    generator = torch.Generator(device=device).manual_seed(0)
+    actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
     for i in range(env.unwrapped.world.horizon + 2):   # past the first episode starts: every graph compiled
         step(actions[i % len(actions)])
     samples = []
@@ -290,12 +296,15 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
 
 
 def _compiled_label(mode: str | None) -> str:
+    if mode == "reduce-overhead":
+        return ", compile_options reduce-overhead (CUDA graphs)"
     return "" if mode is None else (", torch.compile" if mode == "default" else f", torch.compile {mode}")
 
 
-def _torch_twin(n: int, device: str, dtype: Any, draw: str) -> Any:
+def _torch_twin(n: int, device: str, dtype: Any, draw: str, **kwargs: Any) -> Any:
     env = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
-                       device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step")
+                       device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
+                       **kwargs)
     env.reset(seed=0)
     return env
 

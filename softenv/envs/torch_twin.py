@@ -50,6 +50,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         dtype: ``torch.float64`` (default) or ``torch.float32`` for the state and rewards.
         check_actions: check each step's actions (shape, finite, within [-1, 1]): one host sync.
         target_draw: ``"host"`` (the numpy twin's episodes) or ``"device"`` (no host sync; see above).
+        compile_options: ``torch.compile`` arguments (``{"mode": "reduce-overhead"}`` for CUDA graphs):
+            the env compiles its step's tensor work (``fullgraph``; two graphs) and keeps its step count
+            and the action check on the host. Needs ``target_draw="device"``. With CUDA graphs a step's
+            outputs live until the next step: clone what you keep.
         Others as :class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`.
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
@@ -63,7 +67,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  base_scene: dict[str, Any] | None = None, device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float64, check_actions: bool = True, target_draw: str = "host",
-                 **scene: Any) -> None:
+                 compile_options: dict[str, Any] | None = None, **scene: Any) -> None:
         from .soft_sphere import _autoreset_mode
 
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -74,6 +78,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             raise ValueError(f"dtype={dtype!r} must be torch.float64 or torch.float32")
         if target_draw not in ("host", "device"):
             raise ValueError(f"target_draw={target_draw!r} must be 'host' or 'device'")
+        if compile_options is not None and (not isinstance(compile_options, dict) or target_draw != "device"):
+            raise ValueError(f"compile_options={compile_options!r} must be a dict of torch.compile arguments, "
+                             f"and needs target_draw='device' (got {target_draw!r}: the host draw reads the host)")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
         if max_episode_steps is not None:
@@ -115,6 +122,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
+        self._tensor_step = (self._step_tensors if compile_options is None
+                             else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
         if self.device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
             # so CUDA graphs (torch.compile mode="reduce-overhead") may replay on them, state writes included,
@@ -143,6 +152,13 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         a = self._checked(actions)
         self._clock += 1
+        return self._tensor_step(a, self._episodes_may_start())
+
+    def _step_tensors(self, a: torch.Tensor, may_start: bool
+                      ) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
+        """The step's tensor work: what ``compile_options`` compiles. The host's step count stays outside
+        (``may_start``, a bool: one graph for each value). Read by a compiled graph, the count would be
+        an int input, and CUDA graphs record a new graph for each value of an int input."""
         infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.SAME_STEP:
             obs, reward, terminated, truncated, values = self._advance(a, torch.ones_like(self._autoreset))
@@ -153,10 +169,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             _add_masked(final_info, values, done)
             infos.update({"final_obs": final_obs, "_final_obs": done.clone(), "final_info": final_info,
                           "_final_info": done.clone()})
-            return self._restart_rows(obs, done), reward, terminated, truncated, infos
+            return self._restart_rows(obs, done, may_start), reward, terminated, truncated, infos
         reset_now = self._autoreset.clone()
         obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
-        obs = self._restart_rows(obs, reset_now)
+        obs = self._restart_rows(obs, reset_now, may_start)
         _add_masked(infos, values, ~reset_now)
         self._autoreset.copy_(terminated | truncated)
         return obs, reward, terminated, truncated, infos
@@ -273,9 +289,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         period = self.world.horizon + (self.autoreset_mode == AutoresetMode.NEXT_STEP)
         return self._clock % period == 0
 
-    def _restart_rows(self, obs: Any, mask: torch.Tensor) -> Any:
+    def _restart_rows(self, obs: Any, mask: torch.Tensor, may_start: bool) -> Any:
         """Draw new episodes for the masked envs, reset their state and write their first observations."""
-        if not self._episodes_may_start() or not self._episodes.restart(mask):
+        if not may_start or not self._episodes.restart(mask):
             return obs
         self._start(mask)
         fresh = self._observe(self._b, self._episodes.first(), self._features, self._prev)
