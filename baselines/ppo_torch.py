@@ -61,7 +61,7 @@ class Args:
     max_grad_norm: float = 0.5
     log_std_init: float = -1.0
     normalize_obs: bool = True               # running mean/std of observations (CleanRL's wrapper)
-    compile_env: bool = False                # torch.compile the env's step (fullgraph; compiling takes 10-30 s)
+    compile_env: bool = False                # the env compiles its step: CUDA graphs on a GPU (compiling takes 10-30 s)
     hidden: list[int] = field(default_factory=lambda: [64, 64])
 
 
@@ -133,6 +133,9 @@ def make_env(args: Args, split: str = "train") -> Any:
         raise ValueError(f"unknown scene {args.scene!r}; valid scenes: {list(SCENES)}")
     env_id, kwargs = scene_kwargs(args.scene)
     kwargs["task"] = {**kwargs["task"], "split": split}
+    if args.compile_env:    # a step's outputs are used before the next step: CUDA graphs may overwrite them then
+        mode = "reduce-overhead" if torch.device(args.device).type == "cuda" else "default"
+        kwargs["compile_options"] = {"mode": mode}
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
                         device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
                         target_draw=args.target_draw,
@@ -161,7 +164,6 @@ def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
     logp_buf, rew_buf, done_buf, val_buf = (torch.zeros((steps, n), device=device) for _ in range(4))
 
     started = time.perf_counter()
-    env_step = torch.compile(envs.step, fullgraph=True) if args.compile_env else envs.step
     obs, _ = envs.reset(seed=args.seed)
     done = torch.zeros(n, device=device)
     for iteration in range(iterations):
@@ -176,7 +178,7 @@ def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
             with torch.no_grad():
                 action, logp, _, value = agent.act(x)
             act_buf[step], logp_buf[step], val_buf[step] = action, logp, value
-            obs, reward, terminated, truncated, info = env_step(torch.clamp(action, -1.0, 1.0))
+            obs, reward, terminated, truncated, info = envs.step(torch.clamp(action, -1.0, 1.0))
             with torch.no_grad():          # a truncated episode goes on in value: bootstrap from its final observation
                 reward = reward + args.gamma * agent.value(agent.norm(info["final_obs"])) * (truncated & ~terminated)
             rew_buf[step] = reward
@@ -283,7 +285,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--minibatch-size", type=int, default=Args.minibatch_size)
     p.add_argument("--update-epochs", type=int, default=Args.update_epochs)
     p.add_argument("--no-normalize-obs", action="store_true", help="feed raw observations (as SB3's PPO here)")
-    p.add_argument("--compile-env", action="store_true", help="torch.compile the env's step (fewer kernel launches)")
+    p.add_argument("--compile-env", action="store_true",
+                   help="the env compiles its step (CUDA graphs on a GPU; needs --target-draw device)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per seed")
     p.add_argument("--jobs", type=int, default=1, help="seeds trained at once (local worker processes)")
     p.add_argument("--out", help="folder for the weights (ppo-torch-<seed>.pt)")
