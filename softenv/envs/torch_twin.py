@@ -21,7 +21,8 @@ episode can end. Without success termination (the default) those are known on th
 ``horizon`` steps; with it, every step.
 ``"device"`` draws and scores episodes on the device (:mod:`softenv.envs.torch_parts`): with
 ``check_actions=False`` a step then never synchronises with the host and keeps every shape static,
-so ``torch.compile(fullgraph=True)`` captures it whole (tested). Its targets come from
+so ``torch.compile(fullgraph=True)`` captures it whole (tested); for CUDA graphs the env compiles its
+own step (``compile_options``), keeping its step count on the host. Its targets come from
 another generator, so its episodes differ from the numpy twin's; given the same target, the two
 agree to rounding (tested).
 """
@@ -126,7 +127,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                              else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
         if self.device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
-            # so CUDA graphs (torch.compile mode="reduce-overhead") may replay on them, state writes included,
+            # so CUDA graphs (compile_options={"mode": "reduce-overhead"}) may replay on them, state writes included,
             # without copying them in. (Only CUDA has graphs; importing torch._dynamo costs a second.)
             for part in (self, self._episodes):
                 for value in vars(part).values():
