@@ -315,7 +315,8 @@ def test_compile_options_compile_two_graphs_without_int_inputs(mode):
         assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1]) and torch.equal(got[3], want[3])
         assert torch.equal(got[4]["normalized_score"], want[4]["normalized_score"])
     assert len(graphs) == 2
-    inputs = [node.meta.get("example_value") for graph in graphs for node in graph.graph.nodes if node.op == "placeholder"]
+    inputs = [node.meta.get("example_value") for graph in graphs for node in graph.graph.nodes
+              if node.op == "placeholder"]
     assert inputs and all(isinstance(value, torch.Tensor) for value in inputs)
     with pytest.raises(ValueError, match=r"actions\[1, 2\] = nan"):     # the check runs on the host, before the graph
         compiled.step(torch.tensor([[0.0] * 4, [0.0, 0.0, float("nan"), 0.0]] + [[0.0] * 4] * 2))

@@ -256,7 +256,8 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
                 rate = n / torch_step_timing(n, device, torch.float32, "device", mode, calls).median
             except Exception as exc:           # a first try on new hardware: report it, go on with the rest
                 message = " ".join(str(exc).split())             # one line: it is a table cell
-                rows.append(Row("gpu", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200], ok=False))
+                failure = f"failed: {type(exc).__name__}: {message}"[:200]
+                rows.append(Row("gpu", label, float("nan"), "", failure, ok=False))
                 continue
             rows.append(Row("gpu", label, rate, "env-steps/s", f"{rate / numpy_rate:.1f}x the numpy twin",
                             f">= {target / 1e6:.0f}M" if target else "", rate >= target if target else None))
