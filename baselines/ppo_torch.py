@@ -133,7 +133,7 @@ def make_env(args: Args, split: str = "train") -> Any:
         raise ValueError(f"unknown scene {args.scene!r}; valid scenes: {list(SCENES)}")
     env_id, kwargs = scene_kwargs(args.scene)
     kwargs["task"] = {**kwargs["task"], "split": split}
-    if args.compile_env:    # a step's outputs are used before the next step: CUDA graphs may overwrite them then
+    if args.compile_env:    # CUDA graphs overwrite a step's outputs at the next step; the loop is done with them
         mode = "reduce-overhead" if torch.device(args.device).type == "cuda" else "default"
         kwargs["compile_options"] = {"mode": mode}
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",

@@ -97,8 +97,8 @@ def test_a_batch_shape_that_cannot_train_is_refused_by_name(field, value):
 
 
 def test_a_compiled_env_step_trains_as_the_eager_one(trained):
-    """``--compile-env``: the same run with the env's step compiled (``compile_options``). Inductor rounds some float32
-    sums in another order, so the weights drift by rounding only (5e-7 after 12 rollouts here), where a
+    """``--compile-env``: the same run with the env's step compiled (``compile_options``). Inductor rounds
+    some float32 sums in another order, so the weights drift by rounding only (5e-7 after 12 rollouts here), where a
     wrong compiled step (stale state, a lost autoreset) would change them by orders of magnitude more."""
     args, agent, _ = trained
     compiled, _ = train(Args(seed=0, compile_env=True, **SHORT), log=lambda line: None)

@@ -266,7 +266,8 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
 
 def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int) -> Timing:
     """Seconds per step of the torch twin of SoftSphere-v0 (5 repeats of ``calls`` steps, the device
-    synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up)."""
+    synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
+    ``"reduce-overhead"`` goes through the env's ``compile_options``)."""
     import torch
 
     if mode is not None:

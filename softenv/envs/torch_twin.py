@@ -123,8 +123,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
-        self._tensor_step = (self._step_tensors if compile_options is None
-                             else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
+        # the tensor work of a step, compiled when compile_options asks
+        self._tensor_work = (self._step_tensors if compile_options is None
+                              else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
         if self.device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
             # so CUDA graphs (compile_options={"mode": "reduce-overhead"}) may replay on them, state writes included,
@@ -153,7 +154,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         a = self._checked(actions)
         self._clock += 1
-        return self._tensor_step(a, self._episodes_may_start())
+        return self._tensor_work(a, self._episodes_may_start())
 
     def _step_tensors(self, a: torch.Tensor, may_start: bool
                       ) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
