@@ -3,8 +3,8 @@
 SB3 resets finished envs in the same step and expects ``infos`` as a list of dicts with
 ``terminal_observation`` and ``TimeLimit.truncated``; this adapter runs the batched twin in
 ``same_step`` autoreset mode and builds those dicts straight from the twin's info arrays
-(:meth:`SoftSphereVectorEnv.step_values`), column by column: 1.4-1.6x the twin's own step at 256-1,024
-envs with every info key, 1.1x with ``info_keys=("is_success",)`` (``softenv bench --only sb3``). Wrap it in SB3's ``VecMonitor`` for
+(:meth:`SoftSphereVectorEnv.step_values`), column by column: 1.4-1.7x the twin's own step at 256-1,024
+envs with every info key, 1.1-1.2x with ``info_keys=("is_success",)`` (``softenv bench --only sb3``). Wrap it in SB3's ``VecMonitor`` for
 episode statistics. Importing this module imports stable-baselines3 (and torch).
 """
 
