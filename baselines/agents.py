@@ -77,7 +77,7 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
     env_id, kwargs = agent_env_kwargs(algo, scene, split)
     # SB3 reads is_success alone (success rates in its logs); the other terms would cost a dict entry each
-    return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, info_keys=("is_success",), **kwargs))
+    return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, **kwargs))
 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,

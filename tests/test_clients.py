@@ -156,7 +156,7 @@ def test_sb3_adapter_infos_equal_the_single_envs_infos_step_by_step():
     # success ends episodes at different steps, so some envs reset while others run
     scene = {"task": {"terminate_on_success": True, "tolerance": 0.6, "horizon": 12}}
     n = 4
-    adapter = SoftSphereSB3VecEnv(n, **scene)
+    adapter = SoftSphereSB3VecEnv(n, info_keys="all", **scene)
     adapter.seed(20)
     adapter.reset()
     singles = [gym.make("SoftSphere-v0", **scene).unwrapped for _ in range(n)]
@@ -335,7 +335,7 @@ def test_sb3_adapter_info_keys_keep_what_is_asked_and_refuse_unknown_keys():
     from softenv.envs.sb3 import SoftSphereSB3VecEnv
 
     scene = {"task": {"horizon": 2}}
-    full, slim = SoftSphereSB3VecEnv(2, **scene), SoftSphereSB3VecEnv(2, info_keys=("is_success",), **scene)
+    full, slim = SoftSphereSB3VecEnv(2, info_keys="all", **scene), SoftSphereSB3VecEnv(2, **scene)   # default: SB3's
     for venv in (full, slim):
         venv.seed(3)
         venv.reset()
@@ -349,3 +349,9 @@ def test_sb3_adapter_info_keys_keep_what_is_asked_and_refuse_unknown_keys():
     unknown.reset()
     with pytest.raises(ValueError, match=r"info_keys \['score'\] are not info keys"):
         unknown.step(a)
+    with pytest.raises(ValueError, match=r"info_keys='every' must be 'all' or a sequence"):
+        SoftSphereSB3VecEnv(2, info_keys="every")
+    two = SoftSphereSB3VecEnv(2, info_keys=("normalized_score", "force_N"), **scene)
+    two.seed(3)
+    two.reset()
+    assert [set(i) for i in two.step(a)[3]] == [{"normalized_score", "force_N"}] * 2

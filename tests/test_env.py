@@ -335,7 +335,7 @@ def test_sb3_adapter_trains_ppo_for_2000_steps():
 def test_sb3_adapter_reports_terminal_observations():
     from softenv.envs.sb3 import SoftSphereSB3VecEnv
 
-    venv = SoftSphereSB3VecEnv(num_envs=2)
+    venv = SoftSphereSB3VecEnv(num_envs=2, info_keys="all")
     venv.seed(0)
     venv.reset()
     for t in range(100):

@@ -241,3 +241,30 @@ def test_sb3_adapter_serves_the_haptic_twin():
     assert model.num_timesteps >= 512 and len(model.ep_info_buffer) >= 4
     obs = venv.reset()
     assert obs.shape == (4, venv.observation_space.shape[0])
+
+
+def test_sb3_adapter_gives_the_clinical_metrics_when_asked():
+    from softenv.envs.sb3 import SoftSphereSB3VecEnv
+
+    n, horizon = 2, 30
+    venv = SoftSphereSB3VecEnv(n, env_id="SoftSphereHaptic-v0", info_keys=("is_success", "clinical"),
+                               task={"horizon": horizon})
+    twin = gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                        autoreset_mode="same_step", max_episode_steps=horizon)
+    venv.seed(4)
+    venv.reset()
+    twin.reset(seed=4)
+    actions = np.random.default_rng(4).uniform(-1, 1, (horizon, n, 4)).astype(np.float32)
+    for t, a in enumerate(actions):
+        _, _, dones, infos = venv.step(a)
+        expected = twin.step(a)[4]
+        assert dones.all() == (t == horizon - 1)
+        assert all(("clinical" in info) == dones.all() for info in infos)    # only where an episode ends
+    summary = expected["final_info"]["clinical"]
+    for i, info in enumerate(infos):
+        assert set(info["clinical"]) == {key for key in summary if not key.startswith("_")}
+        assert all(value == summary[key][i] or math.isnan(summary[key][i]) for key, value in info["clinical"].items())
+    typo = SoftSphereSB3VecEnv(n, env_id="SoftSphereHaptic-v0", info_keys=("clinic",), task={"horizon": horizon})
+    typo.reset()
+    with pytest.raises(ValueError, match=r"info_keys \['clinic'\] are not info keys.*'clinical'"):
+        typo.step(a)

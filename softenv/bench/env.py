@@ -107,7 +107,8 @@ def _vector_rows(quick: bool) -> list[Row]:
 
 def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
     """The SB3 adapter against the twin it wraps (same-step autoreset, as the adapter runs it), repeats
-    interleaved so that both see the same machine load; the ratio is of the medians."""
+    interleaved so that both see the same machine load; the ratio is of the medians. The target (issue
+    14: within 1.3x) is the default adapter's; ``info_keys='all'`` is timed beside it, for its cost."""
     try:
         from ..envs.sb3 import SoftSphereSB3VecEnv
     except ImportError as exc:
@@ -117,8 +118,8 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
     for n in (256, 1024):
         twin = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point",
                             autoreset_mode="same_step")
-        adapters = {"all info keys": SoftSphereSB3VecEnv(n, "SoftSphere-v0"),
-                    "info_keys=('is_success',)": SoftSphereSB3VecEnv(n, "SoftSphere-v0", info_keys=("is_success",))}
+        adapters = {"default info keys (is_success)": SoftSphereSB3VecEnv(n, "SoftSphere-v0"),
+                    "info_keys='all'": SoftSphereSB3VecEnv(n, "SoftSphere-v0", info_keys="all")}
         twin.reset(seed=0)
         for adapter in adapters.values():
             adapter.seed(0)
@@ -137,10 +138,11 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
             adapter_t = Timing(np.array(samples[name]))
             ratio = adapter_t.median / twin_t.median
             spread = np.array(samples[name]) / np.array(samples["twin"])
+            is_target = name.startswith("default")
             rows.append(Row("sb3", f"SoftSphere-v0: SB3 adapter, {name}, over its twin, {n} envs", ratio,
                             "x the twin's time", f"adapter {n / adapter_t.median:,.0f} vs twin "
                             f"{n / twin_t.median:,.0f} env-steps/s; paired ratios {spread.min():.2f}-{spread.max():.2f}",
-                            "<= 1.3x", ratio <= 1.3))
+                            "<= 1.3x" if is_target else "", ratio <= 1.3 if is_target else None))
             adapters[name].close()
         twin.close()
     return rows

@@ -209,6 +209,8 @@ class SoftSphereHapticVectorEnv(SoftSphereVectorEnv):
     agrees with a single env to rounding only (see :mod:`softenv.devices.laryngoscope`).
     """
 
+    episode_end_info_keys = ("clinical",)
+
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
                  max_episode_steps: int | None = None, autoreset_mode: Any = "next_step",
                  base_scene: dict[str, Any] | None = None, **scene: Any) -> None:

@@ -3,15 +3,16 @@
 SB3 resets finished envs in the same step and expects ``infos`` as a list of dicts with
 ``terminal_observation`` and ``TimeLimit.truncated``; this adapter runs the batched twin in
 ``same_step`` autoreset mode and builds those dicts straight from the twin's info arrays
-(:meth:`SoftSphereVectorEnv.step_values`), column by column: 1.4-1.7x the twin's own step at 256-1,024
-envs with every info key, 1.1-1.2x with ``info_keys=("is_success",)`` (``softenv bench --only sb3``). Wrap it in SB3's ``VecMonitor`` for
+(:meth:`SoftSphereVectorEnv.step_values`), column by column. By default each dict carries what SB3 reads
+(``is_success``): 1.1-1.2x the twin's own step at 256-1,024 envs; with ``info_keys="all"`` (every key
+of the env's info) 1.4-1.7x (``softenv bench --only sb3``). Wrap it in SB3's ``VecMonitor`` for
 episode statistics. Importing this module imports stable-baselines3 (and torch).
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Literal, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -20,18 +21,23 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 
 from .soft_sphere import SoftSphereVectorEnv
 
+SB3_INFO_KEYS = ("is_success",)          # the info keys SB3's own code reads (its logger's success rate)
+
 
 class SoftSphereSB3VecEnv(VecEnv):
-    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", info_keys=None, **scene)``: SB3's view of the
-    batched twin (of any SoftSphere id, the haptic ones included).
+    """``SoftSphereSB3VecEnv(num_envs, env_id="SoftSphere-v0", info_keys=SB3_INFO_KEYS, **scene)``: SB3's
+    view of the batched twin (of any SoftSphere id, the haptic ones included).
 
-    ``info_keys``: the info keys each env's dict carries (default: all of the env's). SB3's own code reads
-    only ``is_success`` (and the ``terminal_observation`` and ``TimeLimit.truncated`` that are always
-    there); building one dict per env per step is most of this adapter's cost, so training that logs
-    nothing else can pass ``info_keys=("is_success",)``."""
+    ``info_keys``: the info keys each env's dict carries besides the ``terminal_observation`` and
+    ``TimeLimit.truncated`` of an ended episode. The default, :data:`SB3_INFO_KEYS`, is what SB3's own
+    code reads (``is_success``, for the success rate of its logger and ``EvalCallback``). ``"all"``
+    carries every key of the env's info (reward terms, ``normalized_score``, ...), as the single env's
+    info has them, for callbacks that log them: building one dict per env per step is most of this
+    adapter's cost, and a dict of every key costs as much again as the twin's step (see the module
+    docstring), so it is asked for, not the default."""
 
-    def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0", info_keys: Sequence[str] | None = None,
-                 **kwargs: Any) -> None:
+    def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0",
+                 info_keys: Sequence[str] | Literal["all"] = SB3_INFO_KEYS, **kwargs: Any) -> None:
         spec = gym.spec(env_id)
         entry = spec.vector_entry_point
         if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
@@ -42,7 +48,9 @@ class SoftSphereSB3VecEnv(VecEnv):
         self.venv: SoftSphereVectorEnv = vector_env(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
                                                     **{**spec.kwargs, **kwargs})
         self.env_id = env_id
-        self.info_keys = None if info_keys is None else tuple(info_keys)
+        if isinstance(info_keys, str) and info_keys != "all":
+            raise ValueError(f"info_keys={info_keys!r} must be 'all' or a sequence of info keys")
+        self.info_keys: tuple[str, ...] | None = None if info_keys == "all" else tuple(info_keys)
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.render_mode = self.venv.render_mode
         self._actions: np.ndarray | None = None
@@ -62,10 +70,12 @@ class SoftSphereSB3VecEnv(VecEnv):
         obs, rewards, terminated, truncated, values, final_obs = self.venv.step_values(self._actions)
         dones = terminated | truncated
         if self.info_keys is not None:
-            missing = [key for key in self.info_keys if key not in values]
+            sometimes = self.venv.episode_end_info_keys          # absent on steps where no episode ends
+            missing = [key for key in self.info_keys if key not in values and key not in sometimes]
             if missing:
-                raise ValueError(f"info_keys {missing} are not info keys of {self.env_id}; available: {list(values)}")
-            values = {key: values[key] for key in self.info_keys}
+                raise ValueError(f"info_keys {missing} are not info keys of {self.env_id}; available: "
+                                 f"{[*values, *(key for key in sometimes if key not in values)]}")
+            values = {key: values[key] for key in self.info_keys if key in values}
         infos = _dict_builder(tuple(values))([_column(v) for v in values.values()])
         if final_obs is not None:
             for i in np.flatnonzero(dones).tolist():

@@ -274,6 +274,7 @@ class SoftSphereVectorEnv(VectorEnv):
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20, "autoreset_mode": AutoresetMode.NEXT_STEP}
+    episode_end_info_keys: tuple[str, ...] = ()      # info keys present only on steps where an episode ends
 
     def __new__(cls, *args: Any, backend: str = "numpy", **kwargs: Any) -> Any:
         # backend="torch": the ideal-device twin on torch tensors (softenv.envs.torch_twin; imports torch)
