@@ -106,9 +106,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._mid, self._half = t(dev.mid), t(dev.half)
         self._low, self._inv_step = t(table.low_), t(table.inv_step_)
         self._flat = t(table._flat)
-        self._strides = torch.as_tensor(table._strides_f, dtype=torch.float64, device=self.device)
+        self._strides = torch.as_tensor(table._stride_list, dtype=torch.int64, device=self.device)
         self._bits = torch.as_tensor(table._bits, device=self.device)
-        self._offsets = torch.as_tensor(table._offsets, device=self.device)
+        self._offsets = table._offsets.tolist()           # the corners' row offsets: constants of the step
         self._inv_sqrt, self._sqrt_var, self._b_rest = t(world.inv_sqrt), t(world.sqrt_variance), t(world.b_rest)
         self._rest_action = t(dev.rest_action.astype(np.float64))
         self._rest_features = t(world.scene.rest_features)
@@ -203,9 +203,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         w = g[:, 0, self._bits[:, 0]]
         for j in range(1, x.shape[1]):
             w = w * g[:, j, self._bits[:, j]]
-        base = (cell.to(torch.float64) @ self._strides).to(torch.int64)
-        rows = self._flat[base[:, None] + self._offsets]                 # (N, 2^d, k)
-        return torch.bmm(w[:, None, :], rows)[:, 0]
+        base = torch.sum(cell.to(torch.int64) * self._strides, dim=-1)
+        # corner by corner, not a gather of (N, 2^d, k) rows and a bmm: compiled, this is one elementwise
+        # kernel that reads the table's rows where they lie (inductor leaves bmm to cuBLAS on CUDA, after
+        # writing the rows out: 470 MB a step at 262,144 envs in float32); 1.5x faster compiled on CPU
+        out = w[:, :1] * self._flat[base + self._offsets[0]]
+        for c in range(1, len(self._offsets)):
+            out = out + w[:, c:c + 1] * self._flat[base + self._offsets[c]]
+        return out
 
     def _advance(self, a: torch.Tensor, stepped: torch.Tensor) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor,
                                                                          dict[str, torch.Tensor]]:
