@@ -38,6 +38,8 @@ class SoftSphereSB3VecEnv(VecEnv):
 
     def __init__(self, num_envs: int = 8, env_id: str = "SoftSphere-v0",
                  info_keys: Sequence[str] | Literal["all"] = SB3_INFO_KEYS, **kwargs: Any) -> None:
+        if isinstance(info_keys, str) and info_keys != "all":
+            raise ValueError(f"info_keys={info_keys!r} must be 'all' or a sequence of info keys")
         spec = gym.spec(env_id)
         entry = spec.vector_entry_point
         if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
@@ -48,8 +50,6 @@ class SoftSphereSB3VecEnv(VecEnv):
         self.venv: SoftSphereVectorEnv = vector_env(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
                                                     **{**spec.kwargs, **kwargs})
         self.env_id = env_id
-        if isinstance(info_keys, str) and info_keys != "all":
-            raise ValueError(f"info_keys={info_keys!r} must be 'all' or a sequence of info keys")
         self.info_keys: tuple[str, ...] | None = None if info_keys == "all" else tuple(info_keys)
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self.render_mode = self.venv.render_mode
