@@ -76,7 +76,7 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
     from softenv.envs.sb3 import SoftSphereSB3VecEnv
 
     env_id, kwargs = agent_env_kwargs(algo, scene, split)
-    # SB3 reads is_success alone (success rates in its logs); the other terms would cost a dict entry each
+    # the adapter's default infos: is_success, all SB3 reads (the other terms would cost a dict entry each)
     return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, **kwargs))
 
 

@@ -101,10 +101,10 @@ class TabulatedResponse(ResponseModel):
         self._strides_f = strides.astype(np.float64)
         # corner c of a cell has bit j of c (the first axis the highest bit) as its offset along axis j
         self._bits = np.array([[(c >> (d - 1 - j)) & 1 for j in range(d)] for c in range(2 ** d)], dtype=np.int64)
-        self._offsets = self._bits @ strides      # (the torch twin reads both)
+        self._offsets = self._bits @ strides
         self._low_col, self._inv_col = self.low_[:, None], self.inv_step_[:, None]
         self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
-        self._stride_list = strides.tolist()
+        self._stride_list = strides.tolist()      # (the torch twin reads it, _bits and _offsets)
 
     @property
     def nodes(self) -> tuple[int, ...]:
