@@ -127,11 +127,13 @@ class World:
         """The observation of one env (``(k,)`` inputs) or a batch (``(n, k)``)."""
         k, d = self.k, self._device_end
         obs = np.empty(b.shape[:-1] + (self.obs_size,), np.float32)   # float64 values rounded on assignment
-        obs[..., :k] = b * self.inv_sqrt
-        obs[..., k:2 * k] = target_b * self.inv_sqrt
         if isinstance(device_state, list):                              # the single env's fast path
+            obs[:k] = b * self.inv_sqrt
+            obs[k:2 * k] = target_b * self.inv_sqrt
             obs[2 * k:] = device_state + prev_action
-        else:
+        else:       # a batch: the products go straight into their float32 slots (rounded as assigned)
+            np.multiply(b, self.inv_sqrt, out=obs[..., :k], casting="same_kind")
+            np.multiply(target_b, self.inv_sqrt, out=obs[..., k:2 * k], casting="same_kind")
             obs[..., 2 * k:d] = device_state
             obs[..., d:] = prev_action
         if self.obs_mode == "dict":
