@@ -5,6 +5,7 @@ the SB3 adapter against the twin it wraps (section ``sb3``); the torch backend b
 
 from __future__ import annotations
 
+import contextlib
 import time
 import tracemalloc
 from typing import Any
@@ -286,8 +287,13 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
         step = env.step if mode is None else torch.compile(env.step, fullgraph=True, mode=mode)
     generator = torch.Generator(device=device).manual_seed(0)
     actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
-    for i in range(env.unwrapped.world.horizon + 2):   # past the first episode starts: every graph compiled
-        step(actions[i % len(actions)])
+    # inductor skips CUDA graphs with no more than a logged warning (a mutated input, a CPU tensor...): raise
+    # instead, so that the row says why rather than timing a step without them
+    strict = (torch._inductor.config.patch({"triton.cudagraph_or_error": True}) if mode == "reduce-overhead"
+              else contextlib.nullcontext())
+    with strict:
+        for i in range(env.unwrapped.world.horizon + 2):   # past the first episode starts: every graph compiled
+            step(actions[i % len(actions)])
     samples = []
     for _ in range(5):
         _synchronize(device)
