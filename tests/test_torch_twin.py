@@ -170,6 +170,19 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
 
 
+def test_the_cuda_graph_timing_runs_on_cpu_tensors_and_leaves_inductor_as_it_was():
+    """The CUDA-graph rows' timing (the env's compile_options, inductor told to raise rather than skip
+    CUDA graphs) runs on CPU tensors too (no graphs there), and the strict setting ends with it."""
+    import torch._inductor.config as inductor_config
+
+    from softenv.bench.env import torch_step_timing
+
+    before = inductor_config.triton.cudagraph_or_error
+    timing = torch_step_timing(64, "cpu", torch.float32, "device", "reduce-overhead", 2)
+    assert timing.median > 0 and inductor_config.triton.cudagraph_or_error == before
+    torch._dynamo.reset()
+
+
 # -- target_draw="device": episodes drawn and scored on the device -------------------------------
 
 
