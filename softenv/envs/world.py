@@ -195,14 +195,18 @@ class World:
         sq_ref = np.maximum(np.sum(r * r, axis=-1), self.floor_sq)
         zero_ratio = np.sqrt(np.sum(r * r, axis=-1) / sq_ref)                    # b stays at rest
         steps = np.minimum(np.arange(self.horizon), T - 1)
-        zero_cum = np.cumsum(zero_ratio[:, steps], axis=1)
-        return Episodes(features, target_b, sq_ref, zero_cum, np.cumsum(self._oracle_ratio(target_b, sq_ref, steps), axis=1))
+        # take, not zero_ratio[:, steps]: fancy indexing returns Fortran order, where cumsum runs 3x slower
+        zero_cum = np.cumsum(zero_ratio.take(steps, axis=1), axis=1)
+        if self.dynamics.stateful:
+            oracle_cum = np.cumsum(self._oracle_ratio(target_b, sq_ref, steps), axis=1)
+        else:
+            oracle_cum = np.zeros((n, self.horizon))                 # the shape is the target at once
+        return Episodes(features, target_b, sq_ref, zero_cum, oracle_cum)
 
     def _oracle_ratio(self, target_b: np.ndarray, sq_ref: np.ndarray, steps: np.ndarray) -> np.ndarray:
-        """Error ratio at each step of the oracle, which holds the target force from the start."""
+        """Error ratio at each step of the oracle (stateful dynamics), which holds the target force
+        from the start."""
         n = target_b.shape[0]
-        if not self.dynamics.stateful:
-            return np.zeros((n, self.horizon))                      # the shape is the target at once
         if target_b.shape[1] == 1:
             # constant target: b_t - g = (1 - r) (1 - move)^t (b_rest - g), in closed form
             decay = (1.0 - self.dynamics.move) ** (np.arange(self.horizon) + 1.0)
