@@ -151,8 +151,8 @@ def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
         raise ValueError(f"total_timesteps={args.total_timesteps!r} must be >= num_envs x num_steps "
                          f"({args.num_envs * args.num_steps}, one rollout)")
     torch.manual_seed(args.seed)
-    device = torch.device(args.device)
     envs = make_env(args)
+    device = envs.device                     # checked by the env: one that this process can use
     obs_size = envs.single_observation_space.shape[0]
     agent = Agent(obs_size, 4, args.hidden, args.log_std_init).to(device)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)

@@ -105,6 +105,15 @@ def test_what_the_torch_backend_cannot_express_is_refused_by_name():
         _make("SoftSphere-v0", "torch", num_envs=2, dtype=torch.float16)
 
 
+def test_a_device_this_process_cannot_use_is_refused_by_name():
+    # cuda:99 exists on no machine: a CPU build and a GPU build of torch both fail to allocate on it
+    with pytest.raises(ValueError, match=r"device='cuda:99' is not a torch device usable here \((a|no) CUDA"):
+        _make("SoftSphere-v0", "torch", num_envs=2, device="cuda:99")
+    with pytest.raises(ValueError, match="device='gpu' is not a torch device usable here"):
+        _make("SoftSphere-v0", "torch", num_envs=2, device="gpu")
+    assert _make("SoftSphere-v0", "torch", num_envs=2, device=torch.device("cpu")).device == torch.device("cpu")
+
+
 def test_bad_actions_are_refused_by_index_and_change_nothing():
     env = _make("SoftSphere-v0", "torch", num_envs=2)
     obs, _ = env.reset(seed=0)

@@ -47,7 +47,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     """``num_envs`` ideal-device SoftSphere envs on torch tensors (see the module docstring).
 
     Args:
-        device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...).
+        device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...); one this process cannot use is a
+            ``ValueError`` that names it.
         dtype: ``torch.float64`` (default) or ``torch.float32`` for the state and rewards.
         check_actions: check each step's actions (shape, finite, within [-1, 1]): one host sync.
         target_draw: ``"host"`` (the numpy twin's episodes) or ``"device"`` (no host sync; see above).
@@ -94,7 +95,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not isinstance(table, TabulatedResponse):
             raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
                              "tabulated response (response.model='exact'); use backend='numpy' for regressors")
-        self.world, self.device, self.dtype, self.check_actions = world, torch.device(device), dtype, check_actions
+        self.world, self.device, self.dtype, self.check_actions = world, _usable_device(device), dtype, check_actions
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs, self.render_mode = int(num_envs), None
@@ -305,6 +306,19 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if isinstance(obs, dict):
             return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
         return torch.where(mask[:, None], fresh, obs)
+
+
+def _usable_device(value: Any) -> torch.device:
+    """``value`` as a torch device this process can put tensors on, or a ValueError that names it (torch's
+    own errors say neither the argument nor the way out: an AssertionError for CUDA on a CPU build)."""
+    try:
+        device = torch.device(value)
+        torch.empty(0, device=device)
+    except (RuntimeError, AssertionError, TypeError) as exc:
+        gpu = "a CUDA device is available" if torch.cuda.is_available() else "no CUDA device is available"
+        raise ValueError(f"device={value!r} is not a torch device usable here ({gpu}; use 'cpu' or a "
+                         f"'cuda:i' that exists): {exc}") from None
+    return device
 
 
 def _add_masked(infos: dict[str, Any], values: dict[str, torch.Tensor], mask: torch.Tensor) -> None:
