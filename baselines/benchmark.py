@@ -315,10 +315,10 @@ def provenance(command: str) -> dict[str, Any]:
     import torch
 
     import softenv
-    from softenv.bench.timing import machine_info
+    from softenv.bench.timing import code_revision, machine_info
 
     machine = machine_info()  # the BLAS kernels are named because they change the bits of every product
-    return {"command": command, "softenv": softenv.__version__, "numpy": np.__version__,
+    return {"command": command, "code": code_revision(), "softenv": softenv.__version__, "numpy": np.__version__,
             "gymnasium": gymnasium.__version__, "stable_baselines3": stable_baselines3.__version__,
             "torch": torch.__version__, "python": platform.python_version(),
             "machine": f"{machine['cpu']} ({platform.machine()}, {machine['logical_cores']} cores, OpenBLAS "
@@ -332,7 +332,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
     out_dir.mkdir(parents=True, exist_ok=True)
     prov = {**provenance(command), "executor": how}
     with open(out_dir / f"{stem}.csv", "w", newline="") as fh:
-        fh.write(f"# made by: {command} ({prov['date']}; softenv {prov['softenv']}, sb3 {prov['stable_baselines3']})\n")
+        fh.write(f"# made by: {command} at {prov['code']} ({prov['date']}; softenv {prov['softenv']}, "
+                 f"sb3 {prov['stable_baselines3']})\n")
         writer = csv.writer(fh)
         quantities = ("mean", "ci_low", "ci_high", "iqm")
         writer.writerow(["scene", "policy", "kind", "seeds", "episodes", "decision_us"] +
@@ -347,7 +348,7 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
                                             {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes})
                for a in plan.agents}
     md = ["# Benchmark: baselines and agents on SoftSphere\n",
-          f"Made by `{command}` in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "
+          f"Made by `{command}` at {prov['code']} in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "

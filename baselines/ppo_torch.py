@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> None:
     import shlex
     import sys
 
-    from softenv.bench.timing import machine_info
+    from softenv.bench.timing import code_revision, machine_info
     from softenv.parallel import Job, describe, run_jobs
 
     from .benchmark import anchor_job
@@ -323,7 +323,7 @@ def main(argv: list[str] | None = None) -> None:
         a.report.parent.mkdir(parents=True, exist_ok=True)
         a.report.write_text("\n".join([
             "# PPO on the torch twin (`baselines/ppo_torch.py`)\n",
-            f"Made by `{command}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {machine['cpu']}, "
+            f"Made by `{command}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {machine['cpu']}, "
             f"{machine['logical_cores']} cores, one torch thread per seed, {describe('local', a.jobs)}; torch {torch.__version__}).\n",
             "Protocol as `softenv compare`: test targets, normalized score against the scene's anchors "
             "(0 = no force, 100 = the planning oracle). Each seed trains on `gym.make_vec(..., backend=\"torch\")` "

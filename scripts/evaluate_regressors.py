@@ -30,7 +30,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from softenv._progress import Progress  # noqa: E402
-from softenv.bench.timing import measure  # noqa: E402
+from softenv.bench.timing import code_revision, measure  # noqa: E402
 from softenv.datasets import paper_dataset, split_by_contact, split_rows  # noqa: E402
 from softenv.render import View, draw_surface  # noqa: E402
 from softenv.response import REGRESSORS, ExactResponse, MinMaxScaler, ResponseModel, make_response  # noqa: E402
@@ -233,7 +233,7 @@ def main() -> None:
                               and r["split"] == split]))
 
     md = ["# The paper's regressors: error against run time", "",
-          f"Made by `python scripts/evaluate_regressors.py --seeds {args.seeds} --out {out}` in "
+          f"Made by `python scripts/evaluate_regressors.py --seeds {args.seeds} --out {out}` at {code_revision()} in "
           f"{time.perf_counter() - started:.0f} s (single thread; numpy {np.__version__}). Data: `paper_dataset` "
           "(10 deformations x 11 magnitudes, force down, noise 1e-5 R), a new noise draw, contact layout, split and "
           f"initialisation per seed ({args.seeds} seeds: mean +- std). The shape model (scree k) is fitted on the "

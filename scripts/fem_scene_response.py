@@ -24,7 +24,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import softenv  # noqa: E402,F401  (registers the ids)
-from softenv.bench.timing import paired_step_ratios  # noqa: E402
+from softenv.bench.timing import code_revision, paired_step_ratios  # noqa: E402
 from softenv.response import REGRESSORS  # noqa: E402
 
 FEM = {"tissue": {"model": "fem"}}
@@ -64,7 +64,7 @@ def main() -> None:
         "(softenv.response.rbf), tabulated on the scene's `response.table_nodes` as the analytic tissue is.", "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; this VM's speed swings "
         "(ratios, not absolute times, are comparable).", "",
-        f"Made by `python {' '.join(sys.argv)}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", ""])
+        f"Made by `python {' '.join(sys.argv)}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", ""])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "fem_scene.md").write_text(text)

@@ -35,6 +35,7 @@ from softenv.fem.verification import stretch_unit_cube, uniaxial_closed_form
 from softenv.geometry import geodesic_distance, paper_mesh
 from softenv.shape_model import ShapeModel
 from softenv.tissue import CLINICAL_MAX_FORCE_N, AnalyticTissue, TissueParams
+from softenv.bench.timing import code_revision
 
 DESIGN = CLINICAL_MAX_FORCE_N
 STEPS = 10
@@ -159,7 +160,7 @@ def main() -> None:
     lines += regressor_section(args.seeds, args.jobs, Path(args.out))
     _plot(Path(args.out) / "fem_indentation.png", fe_forces, fe_depth, curves)
     command = "python " + " ".join(sys.argv)
-    lines += [f"Made by `{command}` in {time.perf_counter() - started:.0f} s "
+    lines += [f"Made by `{command}` at {code_revision()} in {time.perf_counter() - started:.0f} s "
               f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}); plot: `fem_indentation.png`.", ""]
     Path(args.out).mkdir(parents=True, exist_ok=True)
     (Path(args.out) / "fem.md").write_text("\n".join(lines))

@@ -17,6 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import softenv  # noqa: E402,F401  (registers the ids)
+from softenv.bench.timing import code_revision  # noqa: E402
 
 # (label, steps, action: insert, press, sweep, pitch rate) -- 20 ms per step
 SCRIPT = [("insert", 10, [0.5, 0.0, 0.0, 0.0]), ("press", 12, [0.0, 0.9, 0.0, 0.0]),
@@ -47,7 +48,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     fig.savefig(out / "laryngoscope_frames.png")
     (out / "laryngoscope_frames.txt").write_text("made by: python scripts/laryngoscope_frames.py --out "
-                                                 f"{args.out}\n" + "\n".join(captions) + "\n")
+                                                 f"{args.out} at {code_revision()}\n" + "\n".join(captions) + "\n")
     print(f"wrote {out / 'laryngoscope_frames.png'}")
 
 

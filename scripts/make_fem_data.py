@@ -44,6 +44,7 @@ def main() -> None:
     if args.fresh:
         os.environ["SOFTENV_CACHE_DIR"] = tempfile.mkdtemp(prefix="softenv-fem-")   # before softenv reads it
 
+    from softenv.bench.timing import code_revision
     from softenv.envs import ENV_SCENES, HAPTIC_SCENES
     from softenv.envs.config import scene_config
     from softenv.envs.scene import fe_request
@@ -71,7 +72,7 @@ def main() -> None:
             f"Solved in {seconds:.0f} s over {args.jobs} {args.executor} workers"
             f"{' from an empty cache' if args.fresh else ''} on {os.cpu_count()} cores; `{path}` is "
             f"{size / 1e6:.1f} MB; array sha256 `{array_digest(path)}`.\n\n"
-            f"Made by `python {' '.join(sys.argv)}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
+            f"Made by `python {' '.join(sys.argv)}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
     Path(args.report).parent.mkdir(parents=True, exist_ok=True)
     Path(args.report).write_text(text)
     print(text)

@@ -32,6 +32,7 @@ from softenv.geometry import interpolate_latlong  # noqa: E402
 from softenv.render import View, draw_surface  # noqa: E402
 from softenv.scree import cattell_scree  # noqa: E402
 from softenv.shape_model import ShapeModel  # noqa: E402
+from softenv.bench.timing import code_revision  # noqa: E402
 
 EXAGGERATE = 3.0  # figures scale displacements for visibility (stated in their titles)
 RULES = ["scree", "kneedle", "noise", "variance_0.99", "variance_0.999"]
@@ -56,7 +57,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     md = ["# The paper's shape-model claims, reproduced", "",
-          f"Made by `python scripts/paper_shape_model.py --out {out}`. Data: `softenv.paper_dataset` "
+          f"Made by `python scripts/paper_shape_model.py --out {out}` at {code_revision()}. Data: `softenv.paper_dataset` "
           "(contact points spread over the dorsum within 30 deg of the top, force straight down, magnitudes "
           "8 N x (1..11)/11, white noise 1e-5 of the radius unless stated; sphere radius 30 mm).", ""]
 

@@ -65,7 +65,7 @@ def main() -> None:
             results[how] = compare(plan + extra, Path(tmp) / str(i), ROOT / "runs" / f"scaleout-{args.plan}-{i}")
     (wall1, rep1), (wall2, rep2), (wall_ray, rep_ray) = results.values()
     lines = ["# softenv compare: wall time by executor\n",
-             f"Made by `python scripts/scaleout.py --plan {args.plan}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+             f"Made by `python scripts/scaleout.py --plan {args.plan}` at {rep1['provenance']['code']} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
              f"{rep1['provenance']['machine']}; CartPole-v1 stepped at {cartpole:,.0f} steps/s during this run). The "
              f"{args.plan} plan: {len(rep1['summaries'])} table cells (policy x scene); every run starts "
              "from empty training runs, BLAS and torch on one thread per worker.\n",

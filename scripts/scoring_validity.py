@@ -20,6 +20,7 @@ import numpy as np
 
 from softenv.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log
 from softenv.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
+from softenv.bench.timing import code_revision
 
 
 def bootstrap(values: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
@@ -55,7 +56,7 @@ def main() -> None:
                       f"{p['score']:.1f} |")
     command = "python " + " ".join(sys.argv)
     md = ["# Does the trainee score rank skill?\n",
-          f"Made by `{command}` in {time.perf_counter() - started:.0f} s ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n",
+          f"Made by `{command}` at {code_revision()} in {time.perf_counter() - started:.0f} s ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n",
           f"{args.levels} skill levels x {args.per_level} synthetic trainees: the scripted expert's hand log on "
           "SoftSphereHaptic-v0 (family-centre target) degraded by every error at the level's share of its worst amount "
           f"({', '.join(f'{k} {v:g}' for k, v in WORST.items())}; tremor in mm, hesitation in s per pause, lever in "

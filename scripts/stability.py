@@ -28,6 +28,7 @@ import numpy as np
 
 import softenv  # noqa: F401
 from softenv.tissue import AnalyticTissue
+from softenv.bench.timing import code_revision
 
 ROOT = Path(__file__).resolve().parent.parent
 STEPS = 40
@@ -159,7 +160,7 @@ def main() -> None:
     args = parser.parse_args()
     lines = ["# Stability over the documented ranges, and a soak\n",
              f"Made by `python scripts/stability.py --soak-steps {args.soak_steps} --haptic-soak-steps "
-             f"{args.haptic_soak_steps}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
+             f"{args.haptic_soak_steps}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
              f"{STEPS} steps alternating uniform random and bang-bang actions; error = largest float32 decode error "
              "against float64 over the radius; valid = no vertex past the centre and no inverted triangle at any "
              "step; analytic = the analytic tissue finite and valid at 64 loads up to 10x the device's range.\n",

@@ -176,6 +176,8 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
     assert ideal[header.index("glottic_view_pct_mean")] == "" and ideal[header.index("success_mean")] != ""
     csv_text = (tmp_path / "benchmark.csv").read_text()
     assert csv_text.startswith("# made by: softenv compare --test")
+    from softenv.bench.timing import code_revision
+    assert f"at {code_revision()} (" in csv_text.splitlines()[0]        # the code that made it, by commit
     for name in ("policy_error_vs_runtime.png", "benchmark_learning_curves.png", "benchmark_gallery.png"):
         assert (tmp_path / name).stat().st_size > 1000
 

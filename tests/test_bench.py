@@ -63,7 +63,38 @@ def test_bench_run_writes_reports_with_machine_facts(tmp_path):
     assert payload["machine"]["openblas_kernels"] == timing.openblas_kernels()
     assert payload["machine"]["OPENBLAS_CORETYPE"] == os.environ.get("OPENBLAS_CORETYPE", "unset")
     assert payload["blas_advice"] == timing.blas_advice()
+    assert payload["code"] == timing.code_revision()
     md = (tmp_path / "perf_quick.md").read_text()
-    assert "softenv bench --quick --only fit" in md and "| shape model | fit, paper data" in md
+    assert f"softenv bench --quick --only fit` at {payload['code']} in" in md and "| shape model | fit, paper data" in md
     with pytest.raises(ValueError, match="unknown bench section"):
         bench.run(True, tmp_path, ["nope"])
+
+
+def _git(root, *args):
+    return subprocess.run(["git", "-C", str(root), "-c", "user.name=t", "-c", "user.email=t@example.org", *args],
+                          check=True, capture_output=True, text=True).stdout.strip()
+
+
+def test_code_revision_names_the_commit_and_code_changes_only(tmp_path):
+    import softenv
+
+    outside = f"softenv {softenv.__version__} (not a git checkout)"
+    assert timing.code_revision(tmp_path) == outside
+    (tmp_path / "softenv").mkdir()
+    (tmp_path / "softenv" / "step.py").write_text("x = 1\n")
+    (tmp_path / "README.md").write_text("docs\n")
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "add", "-A")
+    _git(tmp_path, "commit", "-qm", "first")
+    head = _git(tmp_path, "rev-parse", "--short=12", "HEAD")
+    assert timing.code_revision(tmp_path) == f"git {head}"
+    (tmp_path / "README.md").write_text("other docs\n")           # docs and results do not change numbers
+    (tmp_path / "notes.txt").write_text("a new file outside the code\n")
+    assert timing.code_revision(tmp_path) == f"git {head}"
+    (tmp_path / "softenv" / "step.py").write_text("x = 2\n")
+    assert timing.code_revision(tmp_path) == f"git {head} + uncommitted changes"
+    _git(tmp_path, "checkout", "-q", "--", "softenv/step.py")
+    (tmp_path / "softenv" / "new.py").write_text("y = 2\n")        # a new module may be imported
+    assert timing.code_revision(tmp_path) == f"git {head} + uncommitted changes"
+    # a package inside someone else's repository (a venv in a checkout): that commit is not the package's
+    assert timing.code_revision(tmp_path / "softenv") == outside

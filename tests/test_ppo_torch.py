@@ -87,6 +87,8 @@ def test_the_command_line_sets_the_batch_shape_and_reports_it(tmp_path):
     text = report.read_text()
     assert "--num-envs 8 --num-steps 16 --minibatch-size 64" in text       # the command, as typed
     assert "| 0 | " in text and "| 384 |" in text                           # 3 rollouts of 8 envs x 16 steps
+    from softenv.bench.timing import code_revision
+    assert f"--report {report}` at {code_revision()} (" in text              # and the code that made it
 
 
 @pytest.mark.parametrize("field,value", [("num_envs", 0), ("num_steps", -1), ("minibatch_size", 0),

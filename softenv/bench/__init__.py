@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..parallel import THREAD_VARS
-from .timing import Row, blas_advice, cartpole_steps_per_second, machine_info
+from .timing import Row, blas_advice, cartpole_steps_per_second, code_revision, machine_info
 
 # section name -> (module, function); each function takes ``(quick, reference)`` -- the CartPole-v1
 # step timing of this run -- and returns rows
@@ -91,11 +91,12 @@ def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elap
     out_dir.mkdir(parents=True, exist_ok=True)
     machine = machine_info()
     stem = f"{name}_quick" if quick else name
-    payload = {"command": command, "quick": quick, "elapsed_s": elapsed, "machine": machine,
+    code = code_revision()
+    payload = {"command": command, "code": code, "quick": quick, "elapsed_s": elapsed, "machine": machine,
                "blas_advice": advice, "rows": [r.as_dict() for r in rows]}
     (out_dir / f"{stem}.json").write_text(json.dumps(payload, indent=2, default=float) + "\n")
     text = [f"# softenv performance{' (quick)' if quick else ''}", "",
-            f"Made by `{command}` in {elapsed:.0f} s. Single thread (BLAS/OpenMP pinned to 1); every time is the "
+            f"Made by `{command}` at {code} in {elapsed:.0f} s. Single thread (BLAS/OpenMP pinned to 1); every time is the "
             "median over repeats, with its interquartile range; CartPole-v1 was measured in the same process.", "",
             "Machine: " + ", ".join(f"{k} {v}" for k, v in machine.items()), "",
             *([f"Warning: {advice}.", ""] if advice else []), table, ""]

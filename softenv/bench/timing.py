@@ -1,11 +1,14 @@
-"""Timing helpers for ``softenv bench``: repeated measurement, medians and spreads, machine facts."""
+"""Timing helpers for ``softenv bench``: repeated measurement, medians and spreads, machine facts and
+the code's revision (for every report under ``results/``)."""
 
 from __future__ import annotations
 
 import os
 import platform
+import subprocess
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -170,3 +173,31 @@ def paired_step_ratios(env: Any, reference: Any, actions: list, steps: int, pair
     of ``steps`` steps each (the machine's drift hits both alike)."""
     return np.array([gym_step_timing(env, actions, steps).median / gym_step_timing(reference, actions, steps).median
                      for _ in range(pairs)])
+
+
+CODE_PATHS = ("softenv", "baselines", "pyproject.toml")     # what a result's numbers depend on
+
+
+def code_revision(root: Path | None = None) -> str:
+    """The git commit the package runs from, ``+ uncommitted changes`` when its code differs from it
+    (docs and results do not count), so that a report names the code that made it; outside a checkout
+    (an installed wheel, or a tree that is not its own git root) the package version."""
+    import softenv
+
+    root = Path(softenv.__file__).resolve().parent.parent if root is None else root
+    fallback = f"softenv {softenv.__version__} (not a git checkout)"
+
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30)
+        if done.returncode != 0:
+            raise OSError(done.stderr.strip())
+        return done.stdout.strip()
+
+    try:
+        if Path(git("rev-parse", "--show-toplevel")).resolve() != root.resolve():
+            return fallback      # e.g. a venv inside some repository: that repository's commit is not ours
+        head = git("rev-parse", "--short=12", "HEAD")
+        changed = git("status", "--porcelain", "--", *CODE_PATHS)         # new files count: code may import them
+    except (OSError, subprocess.SubprocessError):
+        return fallback
+    return f"git {head}" + (" + uncommitted changes" if changed else "")
