@@ -3,6 +3,7 @@
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 
@@ -98,3 +99,14 @@ def test_code_revision_names_the_commit_and_code_changes_only(tmp_path):
     assert timing.code_revision(tmp_path) == f"git {head} + uncommitted changes"
     # a package inside someone else's repository (a venv in a checkout): that commit is not the package's
     assert timing.code_revision(tmp_path / "softenv") == outside
+
+
+def test_the_pinned_allocator_row_times_the_twin_in_a_child_with_the_threshold_pinned():
+    from softenv.bench.env import _pinned_allocator_row
+
+    row = _pinned_allocator_row(64, 5, free_rate=1.0)
+    if platform.libc_ver()[0] != "glibc":
+        assert np.isnan(row.value) and "glibc" in row.spread
+        return
+    assert row.value > 0 and row.unit == "env-steps/s"
+    assert re.fullmatch(r"\d+ page faults a step; [\d.]+x the run above", row.spread), row.spread

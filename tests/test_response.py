@@ -288,6 +288,31 @@ def test_table_scalar_and_vector_lookups_agree_bitwise():
         assert np.array_equal(table.lookup_one(x[i].tolist()), batch[i])
     table.CHUNK = 64                                  # large batches go in chunks (here 4 full and a partial one)
     assert np.array_equal(table.lookup(x), batch)
+    work = table.workspace(300)                       # a batched env's scratch arrays: the same bits
+    assert np.array_equal(table.lookup(x, work), batch)
+    assert np.array_equal(table.lookup(x[::-1].copy(), work), batch[::-1])
+    assert np.array_equal(table.lookup(x[:5], work), batch[:5])      # and for fewer points
+
+
+def test_a_lookup_into_a_workspace_allocates_none_of_its_large_arrays():
+    """The gathered corner rows (N x 16 x k) are the workspace's: what the lookup allocates at once (its
+    result, small arrays and numpy's buffers for broadcast operands) stays far below them (fresh large
+    blocks can cost a page fault a page)."""
+    import tracemalloc
+
+    table = TabulatedResponse([0.0, -0.02, 0.0, -10.0], [0.09, 0.02, 40.0, 10.0],
+                              np.random.default_rng(2).standard_normal((9, 5, 4, 3, 28)))
+    x = np.random.default_rng(3).uniform(table.low_, table.high_, (1024, 4))
+    work = table.workspace(1024)
+    peaks = []
+    for given in (work, None):
+        table.lookup(x, given)
+        tracemalloc.start()
+        table.lookup(x, given)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    assert peaks[1] > work.rows.nbytes                        # without a workspace, the rows are fresh
+    assert peaks[0] < work.rows.nbytes / 4
     with pytest.raises(ValueError, match=r"forces\[0, 2\] = 41 lies outside the tabulated range \[0, 40\]"):
         table.predict([0.01, 0.0, 41.0, 0.0])
 

@@ -318,6 +318,9 @@ class SoftSphereVectorEnv(VectorEnv):
         self._last_target = np.empty((n, k))
         self._autoreset = np.zeros(n, dtype=bool)
         self._episode = None
+        # the step's large temporaries, reused (see TableWork: fresh ones can cost a page fault a page)
+        self._response_work = self.world.response_work(n)
+        self._diff = np.empty((n, k))
         self._renderers: list[SceneRenderer] = []
 
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -381,12 +384,12 @@ class SoftSphereVectorEnv(VectorEnv):
         ep = self._episode
         rows = np.arange(self.num_envs)
         f, normal, sideways = self._actuate(a, stepped)
-        g = w.response(f)
+        g = w.response(f, self._response_work)
         z = self._z.copy() if w.dynamics.stateful else self._z      # the creep state is committed per row below
         b = w.dynamics.step(z, g)
         target, sq_ref = self._targets(ep.target_b), self._targets(ep.sq_ref)
-        d = b - target
-        sq = np.sum(d * d, axis=-1)
+        d = np.subtract(b, target, out=self._diff)
+        sq = np.sum(np.multiply(d, d, out=d), axis=-1)
         c = a - self._prev
         change = c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2] + c[:, 3] * c[:, 3]
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways, change,

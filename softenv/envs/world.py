@@ -19,6 +19,7 @@ from gymnasium import spaces
 
 from .._validation import real_array
 from ..response import TabulatedResponse
+from ..response.exact import TableWork
 from ..devices import device_obs_names
 from ..devices.ideal import IdealDevice
 from .parts import Dynamics, TargetFamily, procedure_schedule
@@ -86,9 +87,16 @@ class World:
 
     # -- response -------------------------------------------------------------------------------
 
-    def response(self, features: np.ndarray) -> np.ndarray:
-        """Equilibrium ``b`` of ``(n, 4)`` force features, each row independent of the others."""
+    def response(self, features: np.ndarray, work: TableWork | None = None) -> np.ndarray:
+        """Equilibrium ``b`` of ``(n, 4)`` force features, each row independent of the others (``work``:
+        a table's scratch arrays from :meth:`response_work`)."""
+        if work is not None:
+            return self._table.lookup(features, work)
         return self.scene.response.predict_rowwise(features)
+
+    def response_work(self, n: int) -> TableWork | None:
+        """Reusable arrays for :meth:`response` on batches of ``n`` (``None`` unless the response is a table)."""
+        return None if self._table is None else self._table.workspace(n)
 
     def response_one(self, features: list[float]) -> np.ndarray:
         """Scalar twin of :meth:`response` for one force given as Python floats (bitwise equal)."""
