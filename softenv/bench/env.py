@@ -123,7 +123,7 @@ def _pinned_allocator_row(n: int, calls: int, free_rate: float) -> Row:
     (``MALLOC_MMAP_THRESHOLD_`` pinned: no dynamic threshold, as after some allocation histories), each
     faulting in on first touch: what the step's reused work arrays guard against."""
     label = f"SoftSphere-v0: batched twin, {n} envs, glibc's mmap threshold pinned at 128 KB"
-    if platform.system() != "Linux" or not platform.libc_ver()[0] == "glibc":
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         return Row("env", label, float("nan"), "", "not measured: glibc's allocator only")
     done = subprocess.run([sys.executable, "-c", f"from softenv.bench.env import pinned_probe; pinned_probe({n}, {calls})"],
                           env={**os.environ, "MALLOC_MMAP_THRESHOLD_": str(PINNED_MMAP_THRESHOLD)},

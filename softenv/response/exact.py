@@ -74,10 +74,11 @@ class TableWork:
     """The scratch arrays of table lookups of up to ``n`` points (:meth:`TabulatedResponse.workspace`).
 
     A batched env keeps one and passes it every step, so its step allocates none of the lookup's large
-    temporaries (the result is a new array, as any numpy function's). That is not about malloc's cost: glibc serves blocks above its mmap threshold (128 KB
-    until the process frees a larger one) with fresh pages that fault in one by one, and whether a
-    process is in that state depends on its allocation history (a profiler, a trainer's own arrays).
-    In that state the lookup of 1,024 points took 1.85 ms in place of 0.21 ms (1,050 page faults).
+    temporaries (the result is a new array, as any numpy function's). Not for malloc's own cost: glibc
+    can serve blocks above its mmap threshold (128 KB until the process frees a larger one) with fresh
+    pages that fault in one by one, and whether a process is in that state depends on its allocation
+    history (a profiler puts it there). In that state a lookup of 1,024 points took 1.85 ms in place of
+    0.21 ms (1,050 page faults).
     """
 
     weights: np.ndarray   # (m, 2^d) corner weights, m = min(n, CHUNK) points at a time
