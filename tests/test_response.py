@@ -292,6 +292,8 @@ def test_table_scalar_and_vector_lookups_agree_bitwise():
     assert np.array_equal(table.lookup(x, work), batch)
     assert np.array_equal(table.lookup(x[::-1].copy(), work), batch[::-1])
     assert np.array_equal(table.lookup(x[:5], work), batch[:5])      # and for fewer points
+    with pytest.raises(ValueError, match=r"forces\[0, 2\] = 41 lies outside the tabulated range \[0, 40\]"):
+        table.predict([0.01, 0.0, 41.0, 0.0])
 
 
 def test_a_lookup_into_a_workspace_allocates_none_of_its_large_arrays():
@@ -313,8 +315,6 @@ def test_a_lookup_into_a_workspace_allocates_none_of_its_large_arrays():
         tracemalloc.stop()
     assert peaks[1] > work.rows.nbytes                        # without a workspace, the rows are fresh
     assert peaks[0] < work.rows.nbytes / 4
-    with pytest.raises(ValueError, match=r"forces\[0, 2\] = 41 lies outside the tabulated range \[0, 40\]"):
-        table.predict([0.01, 0.0, 41.0, 0.0])
 
 
 def test_a_point_a_rounding_error_below_the_table_reads_its_face_not_a_wrapped_row():
