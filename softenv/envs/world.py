@@ -200,8 +200,9 @@ class World:
         T = features.shape[1]
         target_b = self.response(features.reshape(n * T, 4)).reshape(n, T, self.k)
         r = target_b - self.b_rest
-        sq_ref = np.maximum(np.sum(r * r, axis=-1), self.floor_sq)
-        zero_ratio = np.sqrt(np.sum(r * r, axis=-1) / sq_ref)                    # b stays at rest
+        sq_rest = np.sum(r * r, axis=-1)                      # the zero-force policy's squared error: b stays at rest
+        sq_ref = np.maximum(sq_rest, self.floor_sq)
+        zero_ratio = np.sqrt(sq_rest / sq_ref)
         steps = np.minimum(np.arange(self.horizon), T - 1)
         # take, not zero_ratio[:, steps]: fancy indexing returns Fortran order, where cumsum runs 3x slower
         zero_cum = np.cumsum(zero_ratio.take(steps, axis=1), axis=1)
