@@ -292,6 +292,8 @@ def test_table_scalar_and_vector_lookups_agree_bitwise():
     assert np.array_equal(table.lookup(x, work), batch)
     assert np.array_equal(table.lookup(x[::-1].copy(), work), batch[::-1])
     assert np.array_equal(table.lookup(x[:5], work), batch[:5])      # and for fewer points
+    with pytest.raises(ValueError, match=r"work holds 5 points; a lookup of 7 needs workspace\(7\) or larger"):
+        table.lookup(x[:7], table.workspace(5))
     with pytest.raises(ValueError, match=r"forces\[0, 2\] = 41 lies outside the tabulated range \[0, 40\]"):
         table.predict([0.01, 0.0, 41.0, 0.0])
 

@@ -156,6 +156,9 @@ class TabulatedResponse(ResponseModel):
         is computed alone, so chunks change no bit. With ``work`` (from :meth:`workspace` for ``N`` or
         more points) the only large array allocated is the result."""
         work = self.workspace(len(x)) if work is None else work
+        if len(work.rows) < min(len(x), self.CHUNK):
+            raise ValueError(f"work holds {len(work.rows)} points; a lookup of {len(x)} needs "
+                             f"workspace({len(x)}) or larger")
         out = np.empty((len(x), self._flat.shape[1]))
         for start in range(0, len(x), self.CHUNK):
             self._lookup(x[start:start + self.CHUNK], work, out[start:start + self.CHUNK])
