@@ -36,6 +36,7 @@ import torch
 from torch import nn
 
 import softenv  # noqa: F401  (registers the ids)
+from softenv.envs.torch_twin import usable_device
 
 FORMAT_VERSION = 1
 
@@ -134,7 +135,7 @@ def make_env(args: Args, split: str = "train") -> Any:
     env_id, kwargs = scene_kwargs(args.scene)
     kwargs["task"] = {**kwargs["task"], "split": split}
     if args.compile_env:    # CUDA graphs overwrite a step's outputs at the next step; the loop is done with them
-        mode = "reduce-overhead" if torch.device(args.device).type == "cuda" else "default"
+        mode = "reduce-overhead" if usable_device(args.device).type == "cuda" else "default"
         kwargs["compile_options"] = {"mode": mode}
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
                         device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",

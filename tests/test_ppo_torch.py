@@ -98,6 +98,13 @@ def test_a_batch_shape_that_cannot_train_is_refused_by_name(field, value):
         train(Args(**{field: value}), log=lambda line: None)
 
 
+@pytest.mark.parametrize("compile_env", [False, True])
+def test_a_device_this_process_cannot_use_is_refused_by_name(compile_env):
+    """With ``--compile-env`` the device picks the compile mode before the env is made; it is checked there too."""
+    with pytest.raises(ValueError, match="device='gpu' is not a torch device usable here"):
+        train(Args(device="gpu", compile_env=compile_env), log=lambda line: None)
+
+
 def test_a_compiled_env_step_trains_as_the_eager_one(trained):
     """``--compile-env``: the same run with the env's step compiled (``compile_options``). Inductor rounds
     some float32 sums in another order, so the weights drift by rounding only (5e-7 after 12 rollouts here), where a

@@ -95,7 +95,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not isinstance(table, TabulatedResponse):
             raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
                              "tabulated response (response.model='exact'); use backend='numpy' for regressors")
-        self.world, self.device, self.dtype, self.check_actions = world, _usable_device(device), dtype, check_actions
+        self.world, self.device, self.dtype, self.check_actions = world, usable_device(device), dtype, check_actions
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs, self.render_mode = int(num_envs), None
@@ -308,7 +308,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         return torch.where(mask[:, None], fresh, obs)
 
 
-def _usable_device(value: Any) -> torch.device:
+def usable_device(value: Any) -> torch.device:
     """``value`` as a torch device this process can put tensors on, or a ValueError that names it (torch's
     own errors say neither the argument nor the way out: an AssertionError for CUDA on a CPU build)."""
     try:
