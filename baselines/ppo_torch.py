@@ -135,8 +135,8 @@ def make_env(args: Args, split: str = "train") -> Any:
     env_id, kwargs = scene_kwargs(args.scene)
     kwargs["task"] = {**kwargs["task"], "split": split}
     if args.compile_env:    # CUDA graphs overwrite a step's outputs at the next step; the loop is done with them
-        mode = "reduce-overhead" if usable_device(args.device).type == "cuda" else "default"
-        kwargs["compile_options"] = {"mode": mode}
+        kwargs["compile_options"] = {"mode": "default"}
+        kwargs["cuda_graph"] = usable_device(args.device).type == "cuda"
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
                         device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
                         target_draw=args.target_draw,

@@ -162,7 +162,7 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     rows = run()
     assert (tmp_path / "perf-gpu_quick.md").exists()
     assert any(r.metric.startswith("host synchronisations") and r.ok for r in rows)
-    assert sum("torch twin on" in r.metric for r in rows) == 4
+    assert sum("torch twin on" in r.metric for r in rows) == 2 * 5     # 2 sizes x eager, compiled, 3 CUDA graphs
 
 
 def test_the_gpu_rows_run_on_cpu_tensors_too():
@@ -371,6 +371,50 @@ def test_compile_options_are_checked():
         _make("SoftSphere-v0", "torch", num_envs=2, compile_options={"mode": "default"})
     with pytest.raises(ValueError, match="compile_options='reduce-overhead' must be a dict"):
         _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device", compile_options="reduce-overhead")
+
+
+def test_cuda_graph_is_checked():
+    with pytest.raises(ValueError, match="cuda_graph=True needs target_draw='device' \\(got 'host'\\)"):
+        _make("SoftSphere-v0", "torch", num_envs=2, cuda_graph=True)
+    with pytest.raises(ValueError, match="no compile mode that makes CUDA graphs of its own .*'reduce-overhead'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device", cuda_graph=True,
+              compile_options={"mode": "reduce-overhead"})
+    with pytest.raises(ValueError, match="cuda_graph=True needs a CUDA device; got device='cpu'"):
+        _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device", cuda_graph=True)
+
+
+@pytest.mark.parametrize("mode", ["same_step", "next_step"])
+def test_cuda_graphs_recorded_by_the_env_replay_the_eager_env_bit_for_bit(mode):
+    """``cuda_graph=True``: the recorded graphs run the eager step's own kernels on the live state, so
+    they equal the eager env bit for bit (procedure with creep, through autoresets and a reset()); a
+    step's outputs are the graph's tensors, rewritten by the next replay, in new containers. Without
+    CUDA there is nothing to record, and the env says so (above)."""
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="needs a CUDA device"):
+            _make("SoftSphere-v0", "torch", num_envs=2, target_draw="device", cuda_graph=True)
+        return
+
+    def made(**kwargs):
+        env = _make("SoftSphereProcedure-v0", "torch", num_envs=8, device="cuda", target_draw="device",
+                    autoreset_mode=mode, max_episode_steps=5, dynamics={"kind": "viscoelastic"},
+                    check_actions=False, **kwargs)
+        env.reset(seed=3)
+        return env
+
+    graphed, eager = made(cuda_graph=True), made()
+    actions = torch.as_tensor(np.random.default_rng(3).uniform(-1, 1, (30, 8, 4)), device="cuda")
+    rewards = []
+    for i, a in enumerate(actions):                        # five autoresets of every env
+        if i == 20:
+            graphed.reset(seed=4), eager.reset(seed=4)
+        got, want = graphed.step(a), eager.step(a)
+        for g, w in zip(got[:4], want[:4]):
+            assert torch.equal(g, w)
+        assert got[4].keys() == want[4].keys()
+        assert all(torch.equal(got[4][key], want[4][key]) for key in want[4] if isinstance(want[4][key], torch.Tensor))
+        rewards.append(got[1])
+    assert len({id(r) for r in rewards[10:]}) == 2           # two graphs (episodes may start, or not), recorded by now
+    assert got[4] is not graphed.step(actions[0])[4]          # new dicts around the graph's tensors
 
 
 @pytest.mark.parametrize("mode", ["same_step", "next_step"])

@@ -291,11 +291,14 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
                         "not checked: torch.cuda.set_sync_debug_mode needs CUDA", ok=None))
     for n in sizes:
         target = 10e6 if n == 1024 else (500e6 if n >= 262_144 else None)     # the issue's two targets
-        # CUDA graphs (mode "reduce-overhead") matter most at small batches, where kernel launches dominate
-        for mode in (None, "default") + (("reduce-overhead",) if device == "cuda" else ()):
-            label = f"SoftSphere-v0: torch twin on {name}, float32, device draw{_compiled_label(mode)}, {n:,} envs"
+        # CUDA graphs matter most at small batches, where kernel launches dominate: inductor's (mode
+        # "reduce-overhead") and the env's own (cuda_graph), of the eager and the compiled step
+        graphs = [("reduce-overhead", False), (None, True), ("default", True)] if device == "cuda" else []
+        for mode, cuda_graph in [(None, False), ("default", False)] + graphs:
+            label = (f"SoftSphere-v0: torch twin on {name}, float32, device draw{_compiled_label(mode, cuda_graph)}, "
+                     f"{n:,} envs")
             try:
-                rate = n / torch_step_timing(n, device, torch.float32, "device", mode, calls).median
+                rate = n / torch_step_timing(n, device, torch.float32, "device", mode, calls, cuda_graph).median
             except Exception as exc:           # a first try on new hardware: report it, go on with the rest
                 message = " ".join(str(exc).split())             # one line: it is a table cell
                 failure = f"failed: {type(exc).__name__}: {message}"[:200]
@@ -306,20 +309,23 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
     return rows
 
 
-def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int) -> Timing:
+def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int,
+                      cuda_graph: bool = False) -> Timing:
     """Seconds per step of the torch twin of SoftSphere-v0 (5 repeats of ``calls`` steps, the device
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
-    ``"reduce-overhead"`` goes through the env's ``compile_options``)."""
+    ``"reduce-overhead"``, and any mode with ``cuda_graph``, go through the env's own ``compile_options``)."""
     import torch
 
     if mode is not None:
         # dynamo caches graphs per code object, not per env: without a reset a later size would run an
         # earlier timing's graph, recompiled with dynamic shapes, so each figure would depend on the ones before
         torch._dynamo.reset()
-    if mode == "reduce-overhead":
-        # CUDA graphs: the env compiles its own step (compile_options). Compiling env.step whole would make
-        # the host's step count an int input, and CUDA graphs record a new graph for each of its values.
-        env = _torch_twin(n, device, dtype, draw, compile_options={"mode": mode})
+    if mode == "reduce-overhead" or cuda_graph:
+        # CUDA graphs: the env compiles (compile_options) or records (cuda_graph) its own step. Compiling
+        # env.step whole would make the host's step count an int input, and CUDA graphs record a new graph
+        # for each of its values.
+        env = _torch_twin(n, device, dtype, draw, compile_options=None if mode is None else {"mode": mode},
+                          cuda_graph=cuda_graph)
         step = env.step
     else:
         env = _torch_twin(n, device, dtype, draw)
@@ -344,9 +350,11 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
     return Timing(np.array(samples))
 
 
-def _compiled_label(mode: str | None) -> str:
+def _compiled_label(mode: str | None, cuda_graph: bool = False) -> str:
     if mode == "reduce-overhead":
         return ", compile_options reduce-overhead (CUDA graphs)"
+    if cuda_graph:
+        return ", cuda_graph (the env's CUDA graphs" + (")" if mode is None else ", of the compiled step)")
     return "" if mode is None else (", torch.compile" if mode == "default" else f", torch.compile {mode}")
 
 

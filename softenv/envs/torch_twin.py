@@ -22,7 +22,7 @@ episode can end. Without success termination (the default) those are known on th
 ``"device"`` draws and scores episodes on the device (:mod:`softenv.envs.torch_parts`): with
 ``check_actions=False`` a step then never synchronises with the host and keeps every shape static,
 so ``torch.compile(fullgraph=True)`` captures it whole (tested); for CUDA graphs the env compiles its
-own step (``compile_options``), keeping its step count on the host. Its targets come from
+own step (``compile_options``) or records it (``cuda_graph``), keeping its step count on the host. Its targets come from
 another generator, so its episodes differ from the numpy twin's; given the same target, the two
 agree to rounding (tested).
 """
@@ -39,8 +39,11 @@ from gymnasium.vector.utils import batch_space
 from ..response import TabulatedResponse
 from .config import scene_config
 from .parts import reward_terms
+from .torch_graph import GraphedStep
 from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, keep, sum_dtype
 from .world import World
+
+_GRAPH_MODES = ("reduce-overhead", "max-autotune")     # torch.compile modes that record CUDA graphs themselves
 
 
 class SoftSphereTorchVectorEnv(VectorEnv):
@@ -56,6 +59,11 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             the env compiles its step's tensor work (``fullgraph``; two graphs) and keeps its step count
             and the action check on the host. Needs ``target_draw="device"``. With CUDA graphs a step's
             outputs live until the next step: clone what you keep.
+        cuda_graph: record the step's tensor work (eager, or compiled by ``compile_options`` in a mode
+            without CUDA graphs) as CUDA graphs the env replays itself (:mod:`softenv.envs.torch_graph`):
+            a step's host work is then one copy of the actions and one graph launch, without dynamo's and
+            the CUDA-graph trees' per-call checks. Needs a CUDA device and ``target_draw="device"``; a
+            step's outputs live until the next step: clone what you keep.
         Others as :class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`.
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
@@ -69,7 +77,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  base_scene: dict[str, Any] | None = None, device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float64, check_actions: bool = True, target_draw: str = "host",
-                 compile_options: dict[str, Any] | None = None, **scene: Any) -> None:
+                 compile_options: dict[str, Any] | None = None, cuda_graph: bool = False, **scene: Any) -> None:
         from .soft_sphere import _autoreset_mode
 
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
@@ -83,6 +91,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if compile_options is not None and (not isinstance(compile_options, dict) or target_draw != "device"):
             raise ValueError(f"compile_options={compile_options!r} must be a dict of torch.compile arguments, "
                              f"and needs target_draw='device' (got {target_draw!r}: the host draw reads the host)")
+        if cuda_graph and (target_draw != "device" or (compile_options or {}).get("mode") in _GRAPH_MODES):
+            raise ValueError(f"cuda_graph=True needs target_draw='device' (got {target_draw!r}) and no compile mode "
+                             f"that makes CUDA graphs of its own (got compile_options={compile_options!r})")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
         if max_episode_steps is not None:
@@ -124,9 +135,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
-        # the tensor work of a step, compiled when compile_options asks
-        self._tensor_work = (self._step_tensors if compile_options is None
-                              else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
+        # the tensor work of a step, compiled when compile_options asks, recorded when cuda_graph asks
+        work = (self._step_tensors if compile_options is None
+                else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
+        self._tensor_work = GraphedStep(work, self._prev) if cuda_graph else work
         if self.device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
             # so CUDA graphs (compile_options={"mode": "reduce-overhead"}) may replay on them, state writes included,
