@@ -45,14 +45,15 @@ class GraphedStep:
         return _fresh_containers(outputs)
 
     def _run_and_record(self, may_start: bool) -> tuple[Any, ...]:
-        side = torch.cuda.Stream()
-        side.wait_stream(torch.cuda.current_stream())
-        with torch.cuda.stream(side):
-            result = self.work(self.actions, may_start)
-        torch.cuda.current_stream().wait_stream(side)
-        graph = torch.cuda.CUDAGraph()
-        with torch.cuda.graph(graph):
-            outputs = self.work(self.actions, may_start)
+        with torch.cuda.device(self.actions.device):       # streams and capture on the env's GPU, not the current one
+            side = torch.cuda.Stream()
+            side.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(side):
+                result = self.work(self.actions, may_start)
+            torch.cuda.current_stream().wait_stream(side)
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(graph):
+                outputs = self.work(self.actions, may_start)
         self.graphs[may_start] = (graph, outputs)
         return result
 
