@@ -105,11 +105,15 @@ def test_a_device_this_process_cannot_use_is_refused_by_name(compile_env):
         train(Args(device="gpu", compile_env=compile_env), log=lambda line: None)
 
 
-def test_a_compiled_env_step_trains_as_the_eager_one(trained):
-    """``--compile-env``: the same run with the env's step compiled (``compile_options``). Inductor rounds
-    some float32 sums in another order, so the weights drift by rounding only (5e-7 after 12 rollouts here), where a
-    wrong compiled step (stale state, a lost autoreset) would change them by orders of magnitude more."""
+@pytest.mark.parametrize("device", ["cpu"] + (["cuda"] if torch.cuda.is_available() else []))
+def test_a_compiled_env_step_trains_as_the_eager_one(trained, device):
+    """``--compile-env``: the same run with the env's step compiled (``compile_options``; on a GPU also
+    recorded as the env's CUDA graphs). Inductor rounds some float32 sums in another order, so the weights
+    drift by rounding only (5e-7 after 12 rollouts on CPU), where a wrong compiled step (stale state, a lost
+    autoreset, an output overwritten too soon) would change them by orders of magnitude more."""
     args, agent, _ = trained
-    compiled, _ = train(Args(seed=0, compile_env=True, **SHORT), log=lambda line: None)
+    if device != "cpu":
+        agent, _ = train(Args(seed=0, device=device, **SHORT), log=lambda line: None)
+    compiled, _ = train(Args(seed=0, device=device, compile_env=True, **SHORT), log=lambda line: None)
     eager, other = agent.state_dict(), compiled.state_dict()
     assert max(float((eager[k] - other[k]).abs().max()) for k in eager) < 1e-4
