@@ -313,7 +313,8 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
                       cuda_graph: bool = False) -> Timing:
     """Seconds per step of the torch twin of SoftSphere-v0 (5 repeats of ``calls`` steps, the device
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
-    ``"reduce-overhead"``, and any mode with ``cuda_graph``, go through the env's own ``compile_options``)."""
+    ``"reduce-overhead"``, and any timing with ``cuda_graph``, go through the env itself: its ``compile_options``
+    and ``cuda_graph``)."""
     import torch
 
     if mode is not None:
