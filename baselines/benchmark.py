@@ -27,9 +27,10 @@ from softenv.envs.world import World
 from softenv.parallel import Job, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
+from .anchors import anchor_job
 from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .planner import TrajectoryOracle
-from .policies import BASELINES, PlanningOracle, ZeroPolicy, applies, make_baseline
+from .policies import BASELINES, applies, make_baseline
 
 
 @dataclass
@@ -100,25 +101,6 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
     expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
         else 2  # noqa: E731
     return sorted(out, key=expected)
-
-
-def anchor_job(scene: str, episodes: int, oracle_settings: dict[str, Any]
-               ) -> tuple[np.ndarray, np.ndarray, Episodes | None]:
-    """The normalized score's anchors on the scene's test targets: the summed shape error of no force
-    (0) and of the oracle (100). On the ideal device the oracle is :class:`PlanningOracle` (its row
-    comes from its own baseline job); on the laryngoscope it is :class:`TrajectoryOracle`, which plans
-    every episode through the device from the scripted expert's actions, and its episodes are
-    returned too (the table's oracle row)."""
-    _, kwargs = scene_kwargs(scene)
-    kwargs.pop("obs_mode")
-    world = World(make_config(**kwargs))
-    zero = evaluate(ZeroPolicy(world), scene, episodes)
-    if world.device_kind == "ideal":
-        return zero.values["error_sum_mm"], evaluate(PlanningOracle(world), scene, episodes).values["error_sum_mm"], None
-    planner = TrajectoryOracle(scene, **oracle_settings)
-    planner.plan(make_baseline("expert", world), episodes)
-    oracle = evaluate(planner, scene, episodes)
-    return zero.values["error_sum_mm"], oracle.values["error_sum_mm"], oracle
 
 
 def baseline_job(name: str, scene: str, episodes: int) -> Episodes:

@@ -15,7 +15,8 @@ from softenv.envs import ENV_SCENES, HAPTIC_SCENES
 from softenv.envs.config import make_config, scene_config
 from softenv.envs.scene import fe_request
 from softenv.fem.params import FEParams
-from softenv.fem.scene_data import FERequest, FESceneData, scene_data, shipped_file
+from softenv.fem.scene_data import FERequest, FESceneData
+from softenv.fem.store import scene_data, shipped_file
 
 FEM = {"tissue": {"model": "fem"}}
 
@@ -153,12 +154,12 @@ def test_every_id_runs_on_fe_tissue_and_single_and_batched_envs_agree(env_id):
 
 
 def test_a_held_press_on_fe_tissue_reaches_the_fe_curves_indentation():
-    from softenv.devices.laryngoscope import Laryngoscope
-    from softenv.envs.haptic import device_parts
+    from softenv.devices.laryngoscope.part import laryngoscope_parts
+    from softenv.devices.laryngoscope.single import Laryngoscope
     from softenv.envs.world import World
 
     world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], FEM))
-    dev = Laryngoscope(*device_parts(world))
+    dev = Laryngoscope(*laryngoscope_parts(world.scene, world.config))
     press, hold = np.array([0.0, 1.0, 0.0, 0.0]), np.zeros(4)
     for _ in range(6):
         dev.control_step(press)

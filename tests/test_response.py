@@ -8,7 +8,7 @@ import pytest
 from softenv.datasets import paper_dataset, split_rows
 from softenv.forces import Workspace
 from softenv.response import (AnfisResponse, ExactResponse, MinMaxScaler, MLPResponse, PolynomialResponse,
-                              ResponseModel, TabulatedResponse)
+                              ResponseModel, TabulatedResponse, tabulate)
 from softenv.response.anfis import subtractive_clustering
 from softenv.response.mlp import mlp_forward, nguyen_widrow
 from softenv.response.polynomial import monomial_exponents
@@ -338,7 +338,7 @@ def test_tabulated_exact_response_is_close_to_direct(tmp_path):
 
     exact = ExactResponse(AnalyticTissue(d.mesh, d.tissue), DorsumLayout(0.03), sm)
     ws = Workspace((0.035, -0.008, 0.0, -2.0), (0.06, 0.008, 10.0, 2.0))
-    coarse, fine = exact.tabulate(ws, (5, 3, 2, 2)), exact.tabulate(ws, (17, 9, 2, 2))
+    coarse, fine = tabulate(exact, ws, (5, 3, 2, 2)), tabulate(exact, ws, (17, 9, 2, 2))
     x = np.random.default_rng(9).uniform(ws.low, ws.high, (100, 4))
     truth = exact.predict(x)
     e_coarse = np.abs(coarse.predict(x) - truth).max()

@@ -22,10 +22,11 @@ from .. import _cache
 from ..datasets import ForceShapeData, workspace_dataset
 from ..devices.contact import ContactCurve, analytic_curve
 from ..fem.params import FEParams
-from ..fem.scene_data import RAMP_STEPS, FERequest, FESceneData, scene_data
+from ..fem.scene_data import RAMP_STEPS, FERequest, FESceneData
+from ..fem.store import scene_data
 from ..forces import DorsumLayout, Workspace
 from ..geometry import SphereMesh, make_mesh
-from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedResponse, make_response
+from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedResponse, make_response, tabulate
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
 from .config import config_key, material
@@ -150,15 +151,15 @@ def build_scene(config: dict, progress: bool = False) -> Scene:
                                 lambda p: ShapeModel.load(p, mesh=mesh), lambda m, p: m.save(p))
     name = config["response"]["model"]
     if name == "exact":
-        def tabulate() -> ResponseModel:
+        def table() -> ResponseModel:
             # the tissue's own response on a grid: the analytic tissue's, or (no closed form) the FE solves'
             # interpolant (cubic RBF, softenv.response.rbf: the best of results/fem_scene.md)
             exact = (ExactResponse(AnalyticTissue(mesh, tissue), layout, shape_model) if fe is None else
                      RBFResponse().fit(data.forces, shape_model.encode(data.shapes), shape_model=shape_model))
-            return exact.tabulate(workspace, nodes, progress=progress)
+            return tabulate(exact, workspace, nodes, progress=progress)
 
         nodes = config["response"]["table_nodes"]
-        response: ResponseModel = _cache.cached("table", {"scene": key, "nodes": nodes}, tabulate,
+        response: ResponseModel = _cache.cached("table", {"scene": key, "nodes": nodes}, table,
                                                 lambda p: TabulatedResponse.load(p, shape_model=shape_model),
                                                 lambda m, p: m.save(p))
     else:

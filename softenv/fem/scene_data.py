@@ -1,7 +1,8 @@
 """The finite-element data a scene with ``tissue={"model": "fem"}`` reads (numpy only: no FElupe).
 
 An FE scene has no closed-form response; it is built from FE solves made offline
-(:func:`softenv.fem.data.fe_scene_data`) and kept in one versioned ``.npz``:
+(:func:`softenv.fem.data.fe_scene_data`) and kept in one versioned ``.npz``
+(:func:`softenv.fem.store.scene_data` finds it: shipped, cached, or solved now):
 
 * ``train``: the scene's workspace sample (``n_contacts`` contact points x ``n_loads`` final loads,
   each a ramp of ``steps`` load steps, every step a sample), to which the shape model and the
@@ -22,14 +23,11 @@ material, naming the first field that differs. The default scene's file ships wi
 from __future__ import annotations
 
 import os
-import sys
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import _cache
 from .._artifact import load_artifact, require_arrays, save_artifact
 from ..datasets import ForceShapeData
 from ..forces import DorsumLayout, Workspace
@@ -43,7 +41,6 @@ RAMP_STEPS = 4          # load steps per ramp: a scene's n_loads samples per con
 TEST_CONTACTS = 16      # held-out contact points (x the scene's final loads per contact)
 TEST_SEED_OFFSET = 1000  # held-out solves draw their contacts and loads from the scene's seed + this
 CURVE_STEPS = 20        # load steps of the contact curve at the top of the dorsum
-SHIPPED_DIR = Path(__file__).with_name("shipped")
 
 
 @dataclass(frozen=True)
@@ -158,39 +155,3 @@ def _dataset(arrays: dict[str, np.ndarray], part: str, request: FERequest, mesh:
     seed = request.seed + (TEST_SEED_OFFSET if part == "test" else 0)
     return ForceShapeData(forces, shapes, ids, mesh, fe_tissue(request.fe), DorsumLayout(request.fe.radius), 0.0,
                           seed, f"fem-scene-{part}", fe=asdict(request.fe))
-
-
-def shipped_file(request: FERequest) -> Path | None:
-    """The file shipped with softenv for ``request``, if there is one (found by its header)."""
-    for path in sorted(SHIPPED_DIR.glob("*.npz")):
-        _, meta = load_artifact(path, SCENE_DATA_FORMAT, SCENE_DATA_VERSION, header_only=True)
-        if FERequest.from_dict(meta["request"]) == request:
-            return path
-    return None
-
-
-def scene_data(request: FERequest) -> FESceneData:
-    """An FE scene's data: the shipped file made for ``request``, else the cached one, else generated
-    now (the ``fem`` extra; minutes, progress on stderr; every ramp is cached, so a stopped generation
-    resumes) and cached."""
-    path = shipped_file(request)
-    if path is not None:
-        return FESceneData.load(path, request)
-
-    def generate() -> FESceneData:
-        try:
-            from .data import fe_scene_data       # FElupe: only now, for data no file holds
-        except ImportError as exc:
-            raise ImportError(f"tissue.model='fem': softenv ships FE data for the default scene only, and this "
-                              f"scene's ({request.n_contacts} contacts x {request.n_loads} loads on mesh "
-                              f"{request.mesh['kind']}/{request.mesh['resolution']}, E={request.fe.E:g} Pa, "
-                              f"nu={request.fe.nu:g}) must be generated, which needs the fem extra: "
-                              f"pip install 'softenv[fem]' ({exc})") from exc
-        from ..parallel import usable_cores
-
-        print(f"softenv: generating the FE data of this scene on {usable_cores()} cores (about 3 min on 2 cores "
-              "for the default size); cached afterwards", file=sys.stderr)
-        return fe_scene_data(request, jobs=usable_cores(), echo=lambda line: print(line, file=sys.stderr))
-
-    return _cache.cached("fem-scene", {**request.to_dict(), "format": SCENE_DATA_VERSION}, generate,
-                         lambda p: FESceneData.load(p, request), lambda data, p: data.save(p))

@@ -7,16 +7,11 @@
 from typing import Any
 
 from .anfis import AnfisResponse
-from .base import MinMaxScaler, ResponseModel
-from .exact import ExactResponse, TabulatedResponse
+from .base import MODELS, MinMaxScaler, ResponseModel
+from .exact import ExactResponse, TabulatedResponse, tabulate
 from .mlp import MLPResponse
 from .polynomial import PolynomialResponse
 from .rbf import RBFResponse
-
-MODELS: dict[str, type[ResponseModel]] = {
-    cls.kind: cls for cls in (PolynomialResponse, AnfisResponse, MLPResponse, ExactResponse, TabulatedResponse,
-                              RBFResponse)
-}
 
 load_response = ResponseModel.load
 
@@ -52,4 +47,4 @@ def make_response(name: str, seed: int = 0, clip: bool = False, **mlp_options: A
 
 
 __all__ = ["AnfisResponse", "ExactResponse", "MLPResponse", "MODELS", "MinMaxScaler", "PolynomialResponse",
-           "RBFResponse", "REGRESSORS", "ResponseModel", "TabulatedResponse", "load_response", "make_response"]
+           "RBFResponse", "REGRESSORS", "ResponseModel", "TabulatedResponse", "load_response", "make_response", "tabulate"]

@@ -10,21 +10,18 @@ another shape model is an error naming both.
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Any, ClassVar, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
 from .._artifact import load_artifact, require_arrays, save_artifact
-from .._progress import Progress
 from .._validation import check_array
-from ..forces import Workspace
 from ..shape_model import ShapeModel
-
-if TYPE_CHECKING:
-    from .exact import TabulatedResponse
 
 RESPONSE_FORMAT = "softenv.ResponseModel"
 RESPONSE_VERSION = 1
+# every response model class by its kind (a saved model names its kind): each registers itself when defined
+MODELS: dict[str, type["ResponseModel"]] = {}
 
 
 class MinMaxScaler:
@@ -61,6 +58,11 @@ class ResponseModel:
     """
 
     kind: ClassVar[str] = "base"
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "kind" in cls.__dict__:                   # a model of its own kind (not a tweak of one) can be loaded
+            MODELS[cls.kind] = cls
 
     def __init__(self, *, clip: bool = False) -> None:
         self.clip = bool(clip)
@@ -113,26 +115,6 @@ class ResponseModel:
             outside = None if outside is None else outside[0]
         return (y, outside) if return_clipped else y
 
-    def tabulate(self, workspace: Workspace, nodes: Sequence[int], progress: bool = False) -> "TabulatedResponse":
-        """Sample this response on a grid of ``nodes[i]`` points along each workspace axis: a
-        :class:`~softenv.response.TabulatedResponse` (multilinear, row-wise exact, fast)."""
-        from .exact import TabulatedResponse  # the table is itself a response model
-
-        nodes = tuple(int(n) for n in nodes)
-        if len(nodes) != workspace.n_features or min(nodes) < 2:
-            raise ValueError(f"nodes={nodes} needs {workspace.n_features} counts of at least 2")
-        axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(workspace.low, workspace.high, nodes)]
-        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(nodes))
-        values = np.empty((grid.shape[0], self.n_outputs_))
-        chunk = 2048
-        with Progress(-(-grid.shape[0] // chunk), f"tabulating the {self.kind} response", enabled=progress) as bar:
-            for start in range(0, grid.shape[0], chunk):
-                values[start:start + chunk] = self.predict(grid[start:start + chunk])
-                bar.advance()
-        table = TabulatedResponse(workspace.low, workspace.high, values.reshape(*nodes, -1))
-        table.shape_model_fingerprint_ = self.shape_model_fingerprint_
-        return table
-
     def predict_rowwise(self, x: np.ndarray) -> np.ndarray:
         """Predictions for ``(N, d)`` force vectors whose every row is bit-identical to predicting that
         row alone, whatever ``N`` (no BLAS products, whose rounding depends on the batch shape).
@@ -163,8 +145,6 @@ class ResponseModel:
     @classmethod
     def load(cls, path: str | os.PathLike, shape_model: ShapeModel | None = None) -> "ResponseModel":
         """Read a model written by :meth:`save` (any kind when called on the base class)."""
-        from . import MODELS  # the registry lives with the models
-
         arrays, meta = load_artifact(path, RESPONSE_FORMAT, RESPONSE_VERSION)
         require_arrays(arrays, ["input_scale", "input_offset", "output_scale", "output_offset", "b_low", "b_high"], path)
         kind = meta.get("model")

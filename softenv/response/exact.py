@@ -16,7 +16,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._validation import check_array
-from ..forces import ForceLayout, layout_from_dict
+from .._progress import Progress
+from ..forces import ForceLayout, Workspace, layout_from_dict
 from ..geometry import mesh_from_spec
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
@@ -86,6 +87,18 @@ class TableWork:
     rows: np.ndarray      # (m, 2^d, k) the corners' rows, gathered
 
 
+@dataclass(frozen=True)
+class TableGrid:
+    """A table's layout: a point's base corner is ``sum(floor((x - low) * inv_step) * strides)``, and
+    corner ``c`` of its cell is row ``base + offsets[c]`` of ``flat``, weighted along axis ``j`` by
+    ``t_j`` where ``bits[c, j]`` is 1, else ``1 - t_j``."""
+
+    flat: np.ndarray              # (rows, k) node values, one node padded past the top of each axis
+    strides: tuple[int, ...]      # rows between neighbouring nodes along each axis
+    bits: np.ndarray              # (2^d, d) corner c's offset along axis j
+    offsets: tuple[int, ...]      # (2^d,) corner c's row offset from the base corner
+
+
 class TabulatedResponse(ResponseModel):
     """Multilinear interpolation of a response sampled on a regular grid over ``[low, high]``.
 
@@ -124,7 +137,11 @@ class TabulatedResponse(ResponseModel):
         self._offsets = self._bits @ strides
         self._low_col, self._inv_col = self.low_[:, None], self.inv_step_[:, None]
         self._low_list, self._inv_list = self.low_.tolist(), self.inv_step_.tolist()
-        self._stride_list = strides.tolist()      # (the torch twin reads it, _bits and _offsets)
+        self._stride_list = strides.tolist()
+
+    def grid(self) -> TableGrid:
+        """The padded table and its corner layout, for evaluators on other arrays (the torch twin)."""
+        return TableGrid(self._flat, tuple(self._stride_list), self._bits, tuple(self._offsets.tolist()))
 
     @property
     def nodes(self) -> tuple[int, ...]:
@@ -224,3 +241,23 @@ class TabulatedResponse(ResponseModel):
         except KeyError as exc:
             raise ValueError(f"{str(path)!r}: table arrays are missing {exc}") from exc
         return table
+
+
+def tabulate(model: ResponseModel, workspace: Workspace, nodes: Sequence[int], progress: bool = False
+             ) -> TabulatedResponse:
+    """Sample ``model`` on a grid of ``nodes[i]`` points along each workspace axis: a
+    :class:`TabulatedResponse` (multilinear, row-wise exact, fast)."""
+    nodes = tuple(int(n) for n in nodes)
+    if len(nodes) != workspace.n_features or min(nodes) < 2:
+        raise ValueError(f"nodes={nodes} needs {workspace.n_features} counts of at least 2")
+    axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(workspace.low, workspace.high, nodes)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(nodes))
+    values = np.empty((grid.shape[0], model.n_outputs_))
+    chunk = 2048
+    with Progress(-(-grid.shape[0] // chunk), f"tabulating the {model.kind} response", enabled=progress) as bar:
+        for start in range(0, grid.shape[0], chunk):
+            values[start:start + chunk] = model.predict(grid[start:start + chunk])
+            bar.advance()
+    table = TabulatedResponse(workspace.low, workspace.high, values.reshape(*nodes, -1))
+    table.shape_model_fingerprint_ = model.shape_model_fingerprint_
+    return table
