@@ -82,7 +82,7 @@ class _RowPolicy:
     def _act(self, rows: np.ndarray) -> np.ndarray:
         if not self.device:                        # the ideal device: the action is the force
             return self._force(rows, rows[:, -4:].copy())
-        rest = self.world.device.rest_action.astype(np.float64)
+        rest = self.world.force_box.rest_action.astype(np.float64)
         if self._previous is None or len(self._previous) != len(rows):
             self._previous = np.repeat(rest[None], len(rows), axis=0)
         # an episode's first decision (hand at the start, no action yet): forget the last episode's force
@@ -90,7 +90,7 @@ class _RowPolicy:
         fresh = ~np.any(rows[:, -4:], axis=1) & ~np.any(device[:, HAND_POSE], axis=1)
         self._previous[fresh] = rest
         self._previous = force = self._force(rows, self._previous)
-        return self.controller.act(device, self.world.device.features(force))
+        return self.controller.act(device, self.world.force_box.features(force))
 
     def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
         """The force (ideal device's action units) that should reach each row's target."""
@@ -105,7 +105,7 @@ class ZeroPolicy(_RowPolicy):
     def _act(self, rows: np.ndarray) -> np.ndarray:
         if self.device:                            # the hand holds still: the blade never reaches the tongue
             return np.zeros((len(rows), 4))
-        return np.repeat(self.world.device.rest_action[None].astype(np.float64), len(rows), axis=0)
+        return np.repeat(self.world.force_box.rest_action[None].astype(np.float64), len(rows), axis=0)
 
 
 class RandomPolicy(_RowPolicy):
@@ -143,7 +143,7 @@ class InversionPolicy(_RowPolicy):
         # warm start from the previous force; the other starts only on an episode's first decision,
         # when the previous force is the device's rest command
         target = self.target_b(rows)
-        first = np.flatnonzero(np.all(previous == self.world.device.rest_action, axis=1))
+        first = np.flatnonzero(np.all(previous == self.world.force_box.rest_action, axis=1))
         owners = np.concatenate([np.arange(len(rows)), np.repeat(first, len(self.starts))])
         a = np.concatenate([previous, np.tile(self.starts, (len(first), 1))])
         cost = self._solve(a, target[owners])
@@ -152,7 +152,7 @@ class InversionPolicy(_RowPolicy):
         return a[order[best]]
 
     def _residual(self, actions: np.ndarray, target: np.ndarray) -> np.ndarray:
-        return self.forward(self.world.device.features(actions)) - target
+        return self.forward(self.world.force_box.features(actions)) - target
 
     def _solve(self, a: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Projected Levenberg-Marquardt on ``m`` independent problems, in place on ``a`` ``(m, 4)``;
@@ -190,7 +190,7 @@ class PlanningOracle(InversionPolicy):
     reachable, so nothing can do better). Viscoelastic scenes: the creep state ``z`` is recovered
     exactly from the observation (``b = r g_prev + (1 - r) z``, with ``g_prev`` the response to the
     previous force) and the next shape is ``s g + (1 - r)(1 - m) z`` with ``s = r + (1 - r) m``
-    (:class:`softenv.envs.parts.Dynamics`), so the force whose equilibrium ``g`` is nearest to
+    (:class:`softenv.envs.task.Dynamics`), so the force whose equilibrium ``g`` is nearest to
     ``g* = (b*_next - (1 - r)(1 - m) z) / s`` minimises the next step's error exactly: it overshoots
     the target's force to beat the creep (dead-beat control), saturating at the device's limits.
     Greedy planning is optimal while ``g*`` is reachable (the error is 0 at every step); where the
@@ -206,7 +206,7 @@ class PlanningOracle(InversionPolicy):
         if not dyn.stateful or dyn.one_minus_r == 0.0:
             return target
         b = rows[:, :self.k] * self.world.sqrt_variance
-        g_prev = self.world.response(self.world.device.features(rows[:, -4:].astype(np.float64)))
+        g_prev = self.world.response(self.world.force_box.features(rows[:, -4:].astype(np.float64)))
         z = (b - dyn.r * g_prev) / dyn.one_minus_r
         s = dyn.r + dyn.one_minus_r * dyn.move
         return (target - dyn.one_minus_r * (1.0 - dyn.move) * z) / s
@@ -222,7 +222,7 @@ class DirectInversePolicy(_RowPolicy):
 
     def _force(self, rows: np.ndarray, previous: np.ndarray) -> np.ndarray:
         features = self.model.predict(rows[:, self.k:self.k + 4])
-        return np.clip(self.world.device.normalised(features), -1.0, 1.0)
+        return np.clip(self.world.force_box.normalised(features), -1.0, 1.0)
 
 
 class SB3Policy:
@@ -273,9 +273,9 @@ def make_baseline(name: str, world: World, seed: int = 0) -> Policy:
     if name == "random":
         return RandomPolicy(world, seed)
     if name in ("oracle", "expert"):
-        if not applies(name, world.device_kind):
+        if not applies(name, world.device_kind.name):
             other = "expert" if name == "oracle" else "oracle"
-            raise ValueError(f"policy {name!r} does not apply to device.kind={world.device_kind!r}; use {other!r}")
+            raise ValueError(f"policy {name!r} does not apply to device.kind={world.device_kind.name!r}; use {other!r}")
         return PlanningOracle(world) if name == "oracle" else InversionPolicy(world, world.response, name)
     family, _, model_name = name.partition("-")
     if family not in ("invert", "direct") or model_name not in POLICY_MODELS:

@@ -25,6 +25,8 @@ on a CPU too (README, results/ppo-torch-wide.md).
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,7 +38,12 @@ import torch
 from torch import nn
 
 import softenv  # noqa: F401  (registers the ids)
+from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.torch_twin import usable_device
+from softenv.parallel import Job, describe, run_jobs
+
+from .anchors import anchor_job
+from .evaluate import SCENES, bootstrap_ci, evaluate, normalized_scores, scene_kwargs
 
 FORMAT_VERSION = 1
 
@@ -128,8 +135,6 @@ class Agent(nn.Module):
 
 
 def make_env(args: Args, split: str = "train") -> Any:
-    from .evaluate import SCENES, scene_kwargs
-
     if args.scene not in SCENES:
         raise ValueError(f"unknown scene {args.scene!r}; valid scenes: {list(SCENES)}")
     env_id, kwargs = scene_kwargs(args.scene)
@@ -138,7 +143,7 @@ def make_env(args: Args, split: str = "train") -> Any:
         kwargs["compile_options"] = {"mode": "default"}
         kwargs["cuda_graph"] = usable_device(args.device).type == "cuda"
     return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
-                        device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
+                        torch_device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
                         target_draw=args.target_draw,
                         **kwargs)
 
@@ -153,7 +158,7 @@ def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
                          f"({args.num_envs * args.num_steps}, one rollout)")
     torch.manual_seed(args.seed)
     envs = make_env(args)
-    device = envs.device                     # checked by the env: one that this process can use
+    device = envs.torch_device                   # checked by the env: one that this process can use
     obs_size = envs.single_observation_space.shape[0]
     agent = Agent(obs_size, 4, args.hidden, args.log_std_init).to(device)
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)
@@ -254,8 +259,6 @@ def load(path: Path, scene: str) -> Agent:
 def seed_job(args: Args, episodes: int, out: str | None) -> tuple[np.ndarray, dict[str, float]]:
     """Train one seed, save it when ``out`` is given, and return its summed shape errors on the test
     targets (the benchmark's protocol) with the run's figures."""
-    from .evaluate import evaluate
-
     torch.set_num_threads(1)
     agent, run = train(args, log=lambda line: None)
     if out is not None:
@@ -265,15 +268,6 @@ def seed_job(args: Args, episodes: int, out: str | None) -> tuple[np.ndarray, di
 
 
 def main(argv: list[str] | None = None) -> None:
-    import shlex
-    import sys
-
-    from softenv.bench.timing import code_revision, machine_info
-    from softenv.parallel import Job, describe, run_jobs
-
-    from .benchmark import anchor_job
-    from .evaluate import bootstrap_ci, normalized_scores
-
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scene", default=Args.scene)
     p.add_argument("--seeds", type=int, nargs="+", default=[0])

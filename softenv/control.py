@@ -32,9 +32,9 @@ import math
 
 import numpy as np
 
-from .devices import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
+from .devices.laryngoscope import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
 
-# the device slice of the observation (softenv.devices.LARYNGOSCOPE_OBS)
+# the device slice of the observation (softenv.devices.laryngoscope.LARYNGOSCOPE_OBS)
 _BLADE_PITCH, _HAND_X, _HAND_PITCH, _HAND_Y, _NORMAL, _SIDEWAYS, _INCISOR = 2, 8, 10, 11, 12, 13, 14
 HAND_POSE = slice(_HAND_X, _HAND_Y + 1)      # the hand's x, z, pitch, y in the device slice
 

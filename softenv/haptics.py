@@ -3,7 +3,7 @@
 A device driver (or a mouse, or a recorded hand path) calls :meth:`HapticLoop.tick` every
 millisecond with the hand's pose and renders the force it returns; at a graphics rate (30-60 Hz)
 :meth:`HapticLoop.surface` gives the tongue's surface ``X = m + Phi b`` to draw. The physics is the
-single env's (:class:`softenv.devices.laryngoscope.Laryngoscope`, same scene config)::
+single env's (:class:`softenv.devices.laryngoscope.single.Laryngoscope`, same scene config)::
 
     import softenv.haptics
 
@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 
 from ._validation import check_array, check_real
-from .devices.laryngoscope import Laryngoscope
+from .devices.laryngoscope.part import laryngoscope_parts
+from .devices.laryngoscope.single import Laryngoscope
 from .envs import HAPTIC_SCENES
 from .envs.config import scene_config
-from .envs.haptic import device_parts
-from .envs.parts import Dynamics
+from .envs.task import Dynamics
 from .envs.world import World
 
 
@@ -52,7 +52,7 @@ class HapticLoop:
             raise ValueError(f"env_id={env_id!r} is not a haptic id; choose one of {list(HAPTIC_SCENES)}")
         rate = check_real(rate, "rate", 1000.0, 1e5)
         self.world = World(scene_config(HAPTIC_SCENES[env_id], scene))
-        params, contact = device_parts(self.world)
+        params, contact = laryngoscope_parts(self.world.scene, self.world.config)
         params = dataclasses.replace(params, dt=1.0 / rate)
         self.device = Laryngoscope(params, contact)
         self.period = 1.0 / rate

@@ -114,7 +114,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     steps = max(1, int(round(seconds / dt)))
     env = haptic_env(scene, steps)
     world = env.world
-    env.reset(seed=0, options={"target": world.device.normalised(world.family.centre)})
+    env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
     pygame.init()
     try:
         screen = pygame.display.set_mode(SIZE)
@@ -144,7 +144,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     out = Path(out_dir)
     path = out / f"session_{time.strftime('%Y%m%d-%H%M%S')}.csv"
     save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s")
-    live = env.clinical_summary()
+    live = env.device.clinical_summary(env.b)
     report = score_file(path, scene, out)
     echo(f"wrote {path}; score {report['score']:.1f}/100 ("
          + ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"]) + f"); report in {out}/{path.stem}_score.md")
@@ -165,7 +165,7 @@ def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, ste
     profile = clinical.sagittal_profile(vertices, world.scene.mesh.triangles) * radius
     order = np.argsort(np.arctan2(profile[:, 1], profile[:, 0]))
     pygame.draw.polygon(screen, (232, 144, 154), [px(*p) for p in profile[order]])
-    device = env.laryngoscope.drawing()[0]
+    device = env.device.drawing()
     pygame.draw.polygon(screen, (120, 130, 140), [px(*p) for p in device["outline"]])
     pygame.draw.line(screen, (90, 90, 100), px(*device["handle"][0]), px(*device["handle"][1]), 8)
     (a, b), r = device["incisor"][:2], device["incisor"][2]

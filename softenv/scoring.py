@@ -39,7 +39,11 @@ import numpy as np
 
 from ._artifact import atomic_write
 from ._validation import check_choice, check_real
+from .devices.laryngoscope.params import LaryngoscopeParams
+from .devices.laryngoscope.physics import hand_action
 from .envs.config import make_config
+from .envs.scene import degrees_to_features
+from .envs.single import SoftSphereEnv
 from .logs import FORCE_LOG, HAND_LOG, MAX_DURATION_S, check_limits, check_table, read_log, save_log
 
 COLUMNS = FORCE_LOG.columns
@@ -99,9 +103,6 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
 
     Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``.
     """
-    from .envs.scene import degrees_to_features
-    from .envs.soft_sphere import SoftSphereEnv
-
     table = check_trajectory(table)
     config = make_config(**(scene or {}))
     check_ranges(table, config)
@@ -113,19 +114,19 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
     world = env.world
     features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
     # ranges are checked above, so the clip only removes rounding at the box's faces
-    actions = np.clip(world.device.normalised(features), -1.0, 1.0).astype(np.float32)
+    actions = np.clip(world.force_box.normalised(features), -1.0, 1.0).astype(np.float32)
     env.reset(seed=0, options={"target": _family_centre(world)})
     error, force = np.empty(len(times)), np.empty(len(times))
     for i, a in enumerate(actions):
         _, _, _, _, info = env.step(a)
         error[i], force[i] = info["shape_error_mm"], info["force_N"]
-    applied = world.device.features(actions.astype(np.float64))[:, 2:]
+    applied = world.force_box.features(actions.astype(np.float64))[:, 2:]
     jerk = np.diff(applied, n=3, axis=0) / dt ** 3 if len(applied) > 3 else np.zeros((1, 2))
     return _replay(env, times, error, force, float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))
 
 
 def _family_centre(world: Any) -> np.ndarray:
-    return world.device.normalised(world.family.centre)
+    return world.force_box.normalised(world.family.centre)
 
 
 def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, jerk_rms: float,
@@ -140,7 +141,6 @@ def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, j
 
 def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
     """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
-    from .devices.laryngoscope import LaryngoscopeParams
 
     p = LaryngoscopeParams.from_config(config)
     low, high = p.hand_box
@@ -154,7 +154,6 @@ def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
     period: returns the control times ``(K,)`` (s, ends of each period) and the poses ``(K + 1, 4)``
     relative to the start. Errors name the row and column: a pose outside the hand's workspace, or a
     move faster than the device's speed limits."""
-    from .devices.laryngoscope import LaryngoscopeParams, hand_action
     from .trainee import haptic_config
 
     table = check_table(table, HAND_LOG, source)
@@ -191,12 +190,11 @@ def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: 
     ``scene``'s sections) toward the family centre: each control period the hand is commanded the
     velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
     accumulates)."""
-    from .devices.laryngoscope import hand_action
     from .trainee import haptic_env, relative_hand_pose
 
     times, poses = hand_actions(table, scene, source)
     env = haptic_env(scene, len(times))
-    world, p, dt = env.world, env.laryngoscope.params, times[0]
+    world, p, dt = env.world, env.device.laryngoscope.params, times[0]
     env.reset(seed=0, options={"target": _family_centre(world)})
     error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
     for k in range(len(times)):

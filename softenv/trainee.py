@@ -26,7 +26,10 @@ from typing import Any
 import numpy as np
 
 from ._validation import check_real
+from .devices.laryngoscope.params import LaryngoscopeParams
+from .devices.laryngoscope.physics import hand_action
 from .envs import HAPTIC_SCENES
+from .envs.single import SoftSphereEnv
 
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
@@ -41,17 +44,16 @@ def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
 
 def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
     """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
-    from .envs.haptic import SoftSphereHapticEnv
-
     scene = dict(scene or {})
     scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
-    return SoftSphereHapticEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
+    return SoftSphereEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
 
 
 def relative_hand_pose(env: Any) -> np.ndarray:
     """The hand's pose (x, z, pitch, y) relative to its start pose."""
-    gx, gy = env.laryngoscope.params.grip_start
-    x, z, pitch, y = env.laryngoscope.hand_pose
+    laryngoscope = env.device.laryngoscope
+    gx, gy = laryngoscope.params.grip_start
+    x, z, pitch, y = laryngoscope.hand_pose
     return np.array([x - gx, z - gy, pitch, y])
 
 
@@ -67,7 +69,7 @@ def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0
     world = env.world
     target = world.family.centre
     controller = HandController(world.config)
-    obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
+    obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
     device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
     poses = [relative_hand_pose(env)]
     for _ in range(steps):
@@ -110,8 +112,6 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
 
 def _speed_limited(pose: np.ndarray, dt: float, scene: dict[str, Any] | None) -> np.ndarray:
     """The path a hand on the device follows: each step's move scaled down to the speed limits."""
-    from .devices.laryngoscope import LaryngoscopeParams, hand_action
-
     p = LaryngoscopeParams.from_config(haptic_config(scene))
     out = pose.copy()
     for k in range(len(pose) - 1):

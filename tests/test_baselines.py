@@ -47,14 +47,14 @@ def test_better_regressors_make_better_policies(world):
 def test_inversion_recovers_the_least_squares_force_of_a_linear_model(world):
     """An analytic forward model b = M f + c: the inversion must find the least-squares solution."""
     rng = np.random.default_rng(0)
-    M = rng.normal(size=(world.k, 4)) / world.device.half
+    M = rng.normal(size=(world.k, 4)) / world.force_box.half
     c = rng.normal(size=world.k)
     policy = InversionPolicy(world, lambda f: f @ M.T + c, "linear")
     true_action = np.array([0.3, -0.4, 0.2, 0.6])
-    target = world.device.features(true_action) @ M.T + c
+    target = world.force_box.features(true_action) @ M.T + c
     obs = np.zeros(2 * world.k + 8)
     obs[world.k:2 * world.k] = target * world.inv_sqrt
-    obs[-4:] = world.device.rest_action
+    obs[-4:] = world.force_box.rest_action
     np.testing.assert_allclose(policy.predict(obs), true_action, atol=1e-4)
 
 
@@ -184,7 +184,7 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
 
 def test_every_baseline_acts_within_the_box(world):
     obs = np.random.default_rng(0).uniform(-1, 1, (3, 2 * world.k + 8)).astype(np.float32)
-    obs[:, -4:] = world.device.rest_action
+    obs[:, -4:] = world.force_box.rest_action
     for name in BASELINES:
         if name.endswith("mlp") or not applies(name, "ideal"):
             continue                                   # slow to train; the compare test runs direct-poly3 end to end
@@ -202,14 +202,14 @@ def test_hand_controller_realises_the_target_force_through_the_laryngoscope():
     world = env.world
     controller = HandController(world.config)
     target = (world.family.low + world.family.high) / 2
-    obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
+    obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
     device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
     incisor = []
     for _ in range(150):
         obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
         incisor.append(info["incisor_force_N"])
-    assert env.laryngoscope.normal_force == pytest.approx(target[2], rel=0.02)
-    assert env.laryngoscope.sideways_force == pytest.approx(target[3], rel=0.05)
+    assert env.device.laryngoscope.normal_force == pytest.approx(target[2], rel=0.02)
+    assert env.device.laryngoscope.sideways_force == pytest.approx(target[3], rel=0.05)
     assert max(incisor) == 0.0 and info["is_success"]
 
 
@@ -247,7 +247,7 @@ def test_planning_oracle_matches_a_three_step_search_where_the_force_saturates()
         def cost(seq: np.ndarray) -> float:
             z, total = z0.copy(), 0.0
             for a in seq.reshape(3, 4):
-                b = dyn.step(z, world.response(world.device.features(a)[None])[0])
+                b = dyn.step(z, world.response(world.force_box.features(a)[None])[0])
                 total += float(np.sqrt(np.sum((b - target) ** 2)))
             return total
 

@@ -106,7 +106,7 @@ def test_batched_twin_equals_sync_vector_env_of_single_envs(env_id, autoreset, o
     ended = 0
     for _ in range(steps):
         actions = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
-        actions[0] = native.unwrapped.world.device.normalised(native.unwrapped._episode.target_features[0, -1])
+        actions[0] = native.unwrapped.world.force_box.normalised(native.unwrapped._episode.target_features[0, -1])
         x, y = native.step(actions), sync.step(actions)
         assert same(x, y), (x, y)
         ended += int(np.sum(x[2] | x[3]))
@@ -149,7 +149,7 @@ def test_exact_oracle_scores_100_and_zero_force_scores_0():
         obs, reward, _, _, info = env.step(target)
         assert reward == 0.0 and info["is_success"] and info["normalized_score"] == pytest.approx(100.0)
     env.reset(seed=0, options={"target": target})
-    rest = env.unwrapped.world.device.rest_action
+    rest = env.unwrapped.world.force_box.rest_action
     for _ in range(3):
         obs, reward, _, _, info = env.step(rest)
         assert reward < -0.5 and not info["is_success"] and info["normalized_score"] == pytest.approx(0.0, abs=1e-9)
@@ -174,7 +174,7 @@ def test_shape_error_and_reward_agree_with_rebuilt_vertices():
         ref = np.sqrt(np.mean(np.sum((target - rest) ** 2, axis=1)))
         assert info["shape_error_mm"] == pytest.approx(rms * 1e3, rel=1e-9)
         assert reward == pytest.approx(-rms / max(ref, math.sqrt(world.floor_sq / n)), rel=1e-9)
-        f = world.device.features(a.astype(np.float64))
+        f = world.force_box.features(a.astype(np.float64))
         assert info["force_N"] == pytest.approx(math.hypot(f[2], f[3]))
 
 
@@ -194,7 +194,7 @@ def test_viscoelastic_creep_matches_the_closed_form_and_is_stable(tau, dt):
     env.reset(seed=0)
     u = env.unwrapped
     a = np.array([0.1, 0.2, 0.9, -0.4], np.float32)
-    g = u.world.response_one(u.world.device.features_one(a.tolist()))
+    g = u.world.response_one(u.world.force_box.features_one(a.tolist()))
     b0 = u.world.b_rest
     for n in range(1, 40):
         env.step(a)

@@ -40,12 +40,14 @@ def test_gymnasium_and_sb3_checkers_pass_without_warnings(env_id, obs_mode):
 def test_ids_register_with_their_horizons_and_keep_the_device_when_sections_are_passed():
     env = gym.make("softenv:SoftSphereHaptic-v0", device={"coupling_stiffness": 5e3}, task={"tolerance": 0.2})
     u = env.unwrapped
-    assert u.world.config["device"]["kind"] == "laryngoscope" and u.laryngoscope.params.coupling_stiffness == 5e3
+    assert u.world.config["device"]["kind"] == "laryngoscope" and u.device.laryngoscope.params.coupling_stiffness == 5e3
     assert env.spec.max_episode_steps == 250 and u.world.horizon == 250
     procedure = gym.make("SoftSphereHapticProcedure-v0", task={"tolerance": 0.2}).unwrapped
     assert procedure.world.task_kind == "procedure" and procedure.world.horizon == 500
-    with pytest.raises(ValueError, match="device.kind"):
-        gym.make("SoftSphereHaptic-v0", device={"kind": "ideal"})
+    ideal = gym.make("SoftSphereHaptic-v0", device={"kind": "ideal"}).unwrapped      # device.kind alone decides
+    assert type(ideal.device).__name__ == "IdealDevice" and ideal.world.horizon == 250
+    with pytest.raises(ValueError, match=r"device.kind='blade' is not a device kind; allowed: \['ideal', 'laryngoscope'\]"):
+        gym.make("SoftSphereHaptic-v0", device={"kind": "blade"})
 
 
 def test_observation_layout_infos_and_reward_terms():

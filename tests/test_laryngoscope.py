@@ -9,12 +9,14 @@ import pymunk
 import pytest
 
 from softenv.devices.contact import TongueContact
-from softenv.devices.laryngoscope import (ACCURACY, COLLISION_SLOP, Laryngoscope, LaryngoscopeBatch, LaryngoscopeParams,
-                                          substep_count, virtual_coupling)
+from softenv.devices.laryngoscope.batch import LaryngoscopeBatch
+from softenv.devices.laryngoscope.params import ACCURACY, LaryngoscopeParams, substep_count
+from softenv.devices.laryngoscope.part import laryngoscope_parts
+from softenv.devices.laryngoscope.single import Laryngoscope
+from softenv.devices.laryngoscope.space import COLLISION_SLOP, virtual_coupling
 from softenv.devices.presets import PRESETS, render_force
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
-from softenv.envs.haptic import device_parts
 from softenv.envs.world import World
 from softenv.haptics import HapticLoop
 from softenv.tissue import AnalyticTissue
@@ -27,7 +29,8 @@ def make_world(**sections) -> World:
 
 
 def make_device(**sections) -> Laryngoscope:
-    return Laryngoscope(*device_parts(make_world(**sections)))
+    world = make_world(**sections)
+    return Laryngoscope(*laryngoscope_parts(world.scene, world.config))
 
 
 def coupling_pull(dev: Laryngoscope) -> np.ndarray:
@@ -208,7 +211,8 @@ def test_energy_never_grows_without_input(name, stir):
 def test_a_batch_equals_single_devices():
     """Device 0 of a batch (at the origin) equals a single device bit for bit; the others, whose
     positions carry their place's offset, agree to rounding."""
-    params, contact = device_parts(make_world())
+    world = make_world()
+    params, contact = laryngoscope_parts(world.scene, world.config)
     batch = LaryngoscopeBatch(params, contact, 3)
     singles = [Laryngoscope(params, contact) for _ in range(3)]
     rng = np.random.default_rng(0)
@@ -271,16 +275,16 @@ def test_the_haptic_loop_renders_the_press_within_the_preset():
     ({}, 400, 10),
     ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 40, 0),
 ], ids=["default", "stiff"])
-def test_the_laryngoscope_loop_compiled_equals_the_loop_as_written(sections: dict, periods: int,
-                                                                    on_incisors: int) -> None:
-    """The single device's compiled substep loop against :meth:`Laryngoscope._substep_loop` run as
-    written (ScalarOps, helper calls): the same state bits after every control period, over pressing,
-    sweeping, levering and idle periods, in contact with the tongue and the incisors and at the walls;
-    on the default scene and on the stiffest corner (1e6 N/m coupling, 10 g blade, 10 MPa tongue:
-    1,826 substeps a period, the implicit barrier at work; too short a run to reach the incisors)."""
-    compiled, written = make_device(**sections), make_device(**sections)
-    written._loop = Laryngoscope._substep_loop                    # the loop as written, with ScalarOps
-    assert compiled._loop is not Laryngoscope._substep_loop
+def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: dict, periods: int,
+                                                                     on_incisors: int) -> None:
+    """The single device (Python floats, its hand-inlined loop) against the batch's device 0 (numpy,
+    ``pymunk.batch``): the same state after every control period, bit for bit but for the sign of zero, over pressing, sweeping,
+    levering and idle periods, in contact with the tongue and the incisors and at the walls; on the
+    default scene and on the stiffest corner (1e6 N/m coupling, 10 g blade, 10 MPa tongue: 1,826
+    substeps a period, the implicit barrier at work; too short a run to reach the incisors)."""
+    world = make_world(**sections)
+    parts = laryngoscope_parts(world.scene, world.config)
+    single, batch = Laryngoscope(*parts), LaryngoscopeBatch(*parts, 1)
     rng = np.random.default_rng(4)
     actions = rng.uniform(-1, 1, (periods, 4))
     part = periods // 8
@@ -288,12 +292,13 @@ def test_the_laryngoscope_loop_compiled_equals_the_loop_as_written(sections: dic
     actions[3 * part:4 * part] = [1.0, 0.0, 0.0, 1.0]             # insert and lever: the incisors, the walls
     actions[6 * part:6 * part + part // 2] = 0.0
     touched = incisors = 0
-    for a in actions.tolist():
-        compiled.control_step(a)
-        written.control_step(a)
-        s, t = compiled.state(), written.state()
+    for a in actions:
+        single.control_step(a.tolist())
+        batch.control_step(a[None])
+        s, t = single.state(), batch.state()
         for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
-            assert getattr(s, field).tobytes() == getattr(t, field).tobytes(), field
-        touched += compiled.normal_force > 0
-        incisors += compiled.incisor_force > 0
+            assert np.array_equal(getattr(s, field), getattr(t, field)), field     # (zero's sign may differ)
+        assert single.observation() == batch.observation()[0].tolist()
+        touched += single.normal_force > 0
+        incisors += single.incisor_force > 0
     assert touched > periods // 4 and incisors >= on_incisors

@@ -101,7 +101,7 @@ def test_a_batch_shape_that_cannot_train_is_refused_by_name(field, value):
 @pytest.mark.parametrize("compile_env", [False, True])
 def test_a_device_this_process_cannot_use_is_refused_by_name(compile_env):
     """With ``--compile-env`` the device picks the compile mode before the env is made; it is checked there too."""
-    with pytest.raises(ValueError, match="device='gpu' is not a torch device usable here"):
+    with pytest.raises(ValueError, match="torch_device='gpu' is not a torch device usable here"):
         train(Args(device="gpu", compile_env=compile_env), log=lambda line: None)
 
 

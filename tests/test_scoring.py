@@ -135,7 +135,7 @@ def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it(expert_lo
     env = gym.make("SoftSphereHaptic-v0").unwrapped
     world = env.world
     target = (world.family.low + world.family.high) / 2
-    obs, _ = env.reset(seed=0, options={"target": world.device.normalised(target)})
+    obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
     controller, device = HandController(world.config), slice(2 * world.k, 2 * world.k + world.device_obs_size)
     errors = []
     for _ in range(len(expert_log) - 1):

@@ -62,7 +62,7 @@ def test_float64_on_cpu_equals_the_numpy_twin_over_1000_steps(env_id, mode, obs_
 @pytest.mark.parametrize("env_id", ["SoftSphere-v0", "SoftSphereViscoelastic-v0", "SoftSphereProcedure-v0"])
 def test_float32_stays_within_1e5_of_the_float64_reference(env_id, device):
     kwargs = {"num_envs": 8}
-    e64, e32 = _make(env_id, "torch", **kwargs), _make(env_id, "torch", dtype=torch.float32, device=device, **kwargs)
+    e64, e32 = _make(env_id, "torch", **kwargs), _make(env_id, "torch", dtype=torch.float32, torch_device=device, **kwargs)
     e64.reset(seed=0)
     e32.reset(seed=0)
     generator = torch.Generator().manual_seed(0)
@@ -82,7 +82,7 @@ def test_seeding_is_per_env_and_reproducible(device):
     a = torch.as_tensor(np.random.default_rng(1).uniform(-1, 1, (50, 3, 4)), dtype=torch.float32, device=device)
     runs = []
     for seeds in ([5, 6, 7], 5, [9, 6, 7]):
-        env = _make("SoftSphere-v0", "torch", num_envs=3, device=device)
+        env = _make("SoftSphere-v0", "torch", num_envs=3, torch_device=device)
         obs, _ = env.reset(seed=seeds)
         trace = [obs]
         for step in a:
@@ -93,8 +93,10 @@ def test_seeding_is_per_env_and_reproducible(device):
 
 
 def test_what_the_torch_backend_cannot_express_is_refused_by_name():
-    with pytest.raises(ValueError, match="covers the ideal-device ids; SoftSphereHapticVectorEnv"):
+    with pytest.raises(ValueError, match="device.kind='laryngoscope': the torch backend covers device.kind='ideal'"):
         _make("SoftSphereHaptic-v0", "torch", num_envs=2)
+    with pytest.raises(ValueError, match="device.kind='laryngoscope': the torch backend"):
+        _make("SoftSphere-v0", "torch", num_envs=2, device={"kind": "laryngoscope"})
     with pytest.raises(ValueError, match="response.model='poly2'"):
         _make("SoftSphere-v0", "torch", num_envs=2, response={"model": "poly2"})
     with pytest.raises(ValueError, match="obs_mode='vertices'"):
@@ -107,11 +109,11 @@ def test_what_the_torch_backend_cannot_express_is_refused_by_name():
 
 def test_a_device_this_process_cannot_use_is_refused_by_name():
     # cuda:99 exists on no machine: a CPU build and a GPU build of torch both fail to allocate on it
-    with pytest.raises(ValueError, match=r"device='cuda:99' is not a torch device usable here \((a|no) CUDA"):
-        _make("SoftSphere-v0", "torch", num_envs=2, device="cuda:99")
-    with pytest.raises(ValueError, match="device='gpu' is not a torch device usable here"):
-        _make("SoftSphere-v0", "torch", num_envs=2, device="gpu")
-    assert _make("SoftSphere-v0", "torch", num_envs=2, device=torch.device("cpu")).device == torch.device("cpu")
+    with pytest.raises(ValueError, match=r"torch_device='cuda:99' is not a torch device usable here \((a|no) CUDA"):
+        _make("SoftSphere-v0", "torch", num_envs=2, torch_device="cuda:99")
+    with pytest.raises(ValueError, match="torch_device='gpu' is not a torch device usable here"):
+        _make("SoftSphere-v0", "torch", num_envs=2, torch_device="gpu")
+    assert _make("SoftSphere-v0", "torch", num_envs=2, torch_device=torch.device("cpu")).torch_device == torch.device("cpu")
 
 
 def test_bad_actions_are_refused_by_index_and_change_nothing():
@@ -225,7 +227,7 @@ def test_a_device_drawn_episode_scores_as_the_numpy_env_given_its_target(env_id)
     env = _make(env_id, "torch", num_envs=n, target_draw="device", check_actions=False)
     obs, _ = env.reset(seed=11)
     world = env.unwrapped.world
-    targets = (env.unwrapped._episodes.features.numpy() - world.device.mid) / world.device.half
+    targets = (env.unwrapped._episodes.features.numpy() - world.force_box.mid) / world.force_box.half
     actions = np.random.default_rng(2).uniform(-1, 1, (world.horizon, n, 4))
     mine = [env.step(torch.as_tensor(a)) for a in actions]
     for i in range(n):
@@ -391,7 +393,7 @@ def test_cuda_graphs_recorded_by_the_env_replay_the_eager_env_bit_for_bit(mode):
     they equal the eager env bit for bit (procedure with creep, through autoresets and a reset()); a
     step's outputs are the graph's tensors, rewritten by the next replay, in new containers."""
     def made(**kwargs):
-        env = _make("SoftSphereProcedure-v0", "torch", num_envs=8, device="cuda", target_draw="device",
+        env = _make("SoftSphereProcedure-v0", "torch", num_envs=8, torch_device="cuda", target_draw="device",
                     autoreset_mode=mode, max_episode_steps=5, dynamics={"kind": "viscoelastic"},
                     check_actions=False, **kwargs)
         env.reset(seed=3)
@@ -488,7 +490,7 @@ def test_device_draw_restarts_the_envs_that_succeed(mode):
     env = _make("SoftSphere-v0", "torch", num_envs=4, target_draw="device", autoreset_mode=mode,
                 task={"terminate_on_success": True})
     env.reset(seed=0)
-    source, device = env.unwrapped._episodes, env.unwrapped.world.device
+    source, device = env.unwrapped._episodes, env.unwrapped.world.force_box
     first = source.features.clone()
     exact = (first.numpy() - device.mid) / device.half
     actions = torch.as_tensor(np.where([[1], [0], [1], [0]], exact, -1.0))       # envs 0 and 2 press their target

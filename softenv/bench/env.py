@@ -361,7 +361,7 @@ def _compiled_label(mode: str | None, cuda_graph: bool = False) -> str:
 
 def _torch_twin(n: int, device: str, dtype: Any, draw: str, **kwargs: Any) -> Any:
     env = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
-                       device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
+                       torch_device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
                        **kwargs)
     env.reset(seed=0)
     return env

@@ -11,6 +11,8 @@ import gymnasium as gym
 import numpy as np
 
 from ..envs import HAPTIC_SCENES
+from ..envs.config import scene_config
+from ..envs.world import World
 from .env import state_bytes_per_env, twin_step_timing
 from .timing import Row, Timing, gym_step_timing, measure, measure_each, spread_us
 
@@ -91,14 +93,14 @@ def extreme_rows(quick: bool) -> list[Row]:
     stiff barrier keeps a bounded ringing: peak energy within 0.1 % of its value at the hold; one held
     on the teeth is pushed out of their overlap by pymunk's contact, at most the incisor force times
     the collision slop)."""
-    from ..devices.laryngoscope import COLLISION_SLOP, Laryngoscope
-    from ..envs.config import scene_config
-    from ..envs.haptic import device_parts
-    from ..envs.world import World
+    from ..devices.laryngoscope.part import laryngoscope_parts       # pymunk: only for this section
+    from ..devices.laryngoscope.single import Laryngoscope
+    from ..devices.laryngoscope.space import COLLISION_SLOP
 
     rows = []
     for name, sections in EXTREMES.items():
-        params, contact = device_parts(World(scene_config(HAPTIC_SCENES[ENV_ID], sections)))
+        world = World(scene_config(HAPTIC_SCENES[ENV_ID], sections))
+        params, contact = laryngoscope_parts(world.scene, world.config)
         for push, action in PUSHES.items():
             dev = Laryngoscope(params, contact)
             steps = 250 if dev.n_substeps < 100 else 25

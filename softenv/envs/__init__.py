@@ -1,5 +1,6 @@
-"""The Gymnasium environments: scene config, scene building, parts, the single env and its batched
-twin, rendering and the SB3 adapter. Registration (``register_envs``) uses string entry points, so
+"""The Gymnasium environments: scene config, scene building, the task, the single env and its batched
+twin (one class each for every device: ``softenv.devices``), the torch twin, rendering and the SB3
+adapter. Registration (``register_envs``) uses string entry points, so
 ``import softenv`` stays light; the env modules load when an env is made.
 
 Every id is registered with its scene overrides as the ``base_scene`` keyword; the sections a user
@@ -35,9 +36,8 @@ def register_envs() -> None:
     for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items():
         if env_id in gym.registry:
             continue
-        module = "haptic:SoftSphereHaptic" if env_id in HAPTIC_SCENES else "soft_sphere:SoftSphere"
-        gym.register(id=env_id, entry_point=f"softenv.envs.{module}Env",
-                     vector_entry_point=f"softenv.envs.{module}VectorEnv",
+        gym.register(id=env_id, entry_point="softenv.envs.single:SoftSphereEnv",
+                     vector_entry_point="softenv.envs.make:make_vector_env",
                      max_episode_steps=scene.get("task", {}).get("horizon", MAX_EPISODE_STEPS),
                      kwargs={"base_scene": scene})
 

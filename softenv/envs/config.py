@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from .._validation import check_choice, check_int, check_real
+from ..devices.base import device_kind
 from ..fem.params import FE_POISSON
 from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
@@ -56,6 +57,11 @@ def _choice(*options: Any):
 
 def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
     return lambda v, name: None if v is None else check(v, name)
+
+
+def _device_kind(v: Any, name: str) -> str:
+    device_kind(v, name)                  # loads the kind's module (not its physics): refuses what names none
+    return v
 
 
 def _bool(v: Any, name: str) -> bool:
@@ -127,14 +133,15 @@ SCHEMA: dict[str, dict[str, Field]] = {
                              "grid of the tabulated exact response (insertion, lateral, normal, sideways)"),
     },
     "device": {
-        "kind": Field("ideal", "", "ideal | laryngoscope", _choice("ideal", "laryngoscope"),
-                      "ideal: force = scaled action; laryngoscope: a blade in pymunk moved by a hand (softenv.devices)"),
+        "kind": Field("ideal", "", "ideal | laryngoscope | module:attribute", _device_kind,
+                      "ideal: force = scaled action; laryngoscope: a blade in pymunk moved by a hand; or a "
+                      "'module:attribute' naming a softenv.devices.base.DeviceKind (README: adding a device)"),
         "insertion_deg": Field((30.0, 120.0), "deg", "within [0, 180]", _pair(0, 180),
                                "contact range along the midline, from the front (0) over the top (90)"),
         "lateral_deg": Field(20.0, "deg", "(0, 80]", _real(0, 80, lo_open=True), "contact range off the midline, +-"),
         "max_normal_force": Field(40.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest pressing force"),
         "max_sideways_force": Field(10.0, "N", "(0, 1e6]", _real(0, 1e6, lo_open=True), "largest sideways force, +-"),
-        # the laryngoscope's parameters (ignored by the ideal device); see softenv.devices.laryngoscope
+        # the laryngoscope's parameters (ignored by other devices); see softenv.devices.laryngoscope.params
         "blade_mass": Field(0.08, "kg", "[0.005, 10]", _real(0.005, 10), "Macintosh 3 blade (stainless, ~80 g)"),
         "handle_mass": Field(0.15, "kg", "[0, 10]", _real(0, 10), "battery handle held by the hand (~150 g)"),
         "coupling_stiffness": Field(2000.0, "N/m", "(0, 1e7]", _real(0, 1e7, lo_open=True),

@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-from .soft_sphere import SoftSphereVectorEnv
+from .vector import SoftSphereVectorEnv
 
 SB3_INFO_KEYS = ("is_success",)          # the info keys SB3's own code reads (its logger's success rate)
 

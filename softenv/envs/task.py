@@ -1,4 +1,4 @@
-"""The parts an environment is composed of besides its device (``softenv.devices``): dynamics and task.
+"""The task an environment poses besides its device (``softenv.devices``): targets, dynamics, reward.
 
 Each part works on arrays with any leading batch shape, so the single environment (state of shape
 ``(k,)``) and its batched twin (``(N, k)``) call the same code. Scalar twins exist only where the

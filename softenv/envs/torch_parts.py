@@ -22,14 +22,15 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from .parts import procedure_features
+from .batching import seeded_episodes, target_option
+from .task import procedure_features
 from .world import World
 
 Lookup = Callable[[torch.Tensor], torch.Tensor]
 
 
 class TorchOps:
-    """The elementwise operations of :mod:`softenv.envs.parts`, on tensors."""
+    """The elementwise operations of :mod:`softenv.envs.task`, on tensors."""
 
     sqrt = staticmethod(torch.sqrt)
 
@@ -92,8 +93,6 @@ class HostEpisodes:
         self.rows = torch.arange(num_envs, device=tensor(0.0).device)
 
     def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
-        from .soft_sphere import seeded_episodes
-
         self.rngs, episodes = seeded_episodes(self.world, self.rngs, seed, options)
         self.arrays = {name: self.tensor(getattr(episodes, name), sum_dtype(name, None))
                        for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
@@ -128,7 +127,7 @@ class HostEpisodes:
 class DeviceEpisodes:
     """Episodes drawn and scored on the device (see the module docstring).
 
-    The target is drawn as :meth:`~softenv.envs.parts.TargetFamily.sample_many` draws it (a cell of the
+    The target is drawn as :meth:`~softenv.envs.task.TargetFamily.sample_many` draws it (a cell of the
     split, then a point in it), from uniforms of :func:`episode_uniforms`. ``reset(seed=s)`` seeds env
     ``i`` with ``s + i`` and restarts its episode count; ``reset()`` goes on to each env's next episode.
     """
@@ -153,10 +152,8 @@ class DeviceEpisodes:
     # -- episode starts -----------------------------------------------------------------------------
 
     def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
-        from .soft_sphere import _target_option
-
         n = len(self.seed)
-        target = _target_option(self.world, options)            # everything is checked before the state changes
+        target = target_option(self.world, options)            # everything is checked before the state changes
         if seed is None:
             seeds: list[Any] = [None] * n
         else:

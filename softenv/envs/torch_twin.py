@@ -1,9 +1,9 @@
 """The batched SoftSphere twin in torch: the ideal-device ids on CPU or GPU tensors.
 
 ``gym.make_vec("SoftSphere-v0", num_envs=N, vectorization_mode="vector_entry_point", backend="torch",
-device="cuda", dtype=torch.float32)`` makes a :class:`SoftSphereTorchVectorEnv`. It takes actions and
-returns observations, rewards, flags and infos as tensors on ``device``, with the numpy twin's rules
-(:class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`): the same world (scene, response table,
+torch_device="cuda", dtype=torch.float32)`` makes a :class:`SoftSphereTorchVectorEnv`. It takes actions and
+returns observations, rewards, flags and infos as tensors on ``torch_device``, with the numpy twin's rules
+(:class:`~softenv.envs.vector.SoftSphereVectorEnv`): the same world (scene, response table,
 targets, dynamics, reward weights), the same seeding (per-env numpy generators draw the targets at
 reset, so both twins play the same episodes), the same autoreset modes. In float64 it equals the numpy
 twin to rounding (the response's corner sum runs in another order: tested within 1e-12 over 1,000
@@ -37,8 +37,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..response import TabulatedResponse
+from .batching import autoreset_mode as autoreset_mode_of
 from .config import scene_config
-from .parts import reward_terms
+from .task import reward_terms
 from .torch_graph import GraphedStep
 from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, keep, sum_dtype
 from .world import World
@@ -50,7 +51,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     """``num_envs`` ideal-device SoftSphere envs on torch tensors (see the module docstring).
 
     Args:
-        device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...); one this process cannot use is a
+        torch_device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...); one this process cannot use is a
             ``ValueError`` that names it.
         dtype: ``torch.float64`` (default) or ``torch.float32`` for the state and rewards.
         check_actions: check each step's actions (shape, finite, within [-1, 1]): one host sync.
@@ -64,7 +65,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             a step's host work is then one copy of the actions and one graph launch, without dynamo's and
             the CUDA-graph trees' per-call checks. Needs a CUDA device and ``target_draw="device"``; a
             step's outputs live until the next step: clone what you keep.
-        Others as :class:`~softenv.envs.soft_sphere.SoftSphereVectorEnv`.
+        Others as :class:`~softenv.envs.vector.SoftSphereVectorEnv`.
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
     ``info["final_obs"]`` holds every env's last observation (rows where ``info["_final_obs"]``) and
@@ -75,11 +76,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, obs_mode: str = "vector",
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
-                 base_scene: dict[str, Any] | None = None, device: str | torch.device = "cpu",
+                 base_scene: dict[str, Any] | None = None, torch_device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float64, check_actions: bool = True, target_draw: str = "host",
                  compile_options: dict[str, Any] | None = None, cuda_graph: bool = False, **scene: Any) -> None:
-        from .soft_sphere import _autoreset_mode
-
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
         if render_mode is not None:
@@ -99,47 +98,50 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if max_episode_steps is not None:
             scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
         world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
-        if world.device_kind != "ideal":
-            raise ValueError(f"device.kind={world.device_kind!r}: the torch backend covers the ideal device only "
-                             "(the laryngoscope's physics is pymunk); use backend='numpy'")
+        if world.device_kind.name != "ideal":
+            raise ValueError(f"device.kind={world.config['device']['kind']!r}: the torch backend covers "
+                             "device.kind='ideal' only (other devices step on Python floats or numpy: pymunk has "
+                             "no tensors); use backend='numpy'")
         table = world.scene.response
         if not isinstance(table, TabulatedResponse):
             raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
                              "tabulated response (response.model='exact'); use backend='numpy' for regressors")
-        self.world, self.device, self.dtype, self.check_actions = world, usable_device(device), dtype, check_actions
-        self.autoreset_mode = _autoreset_mode(autoreset_mode)
+        self.world, self.torch_device, self.dtype = world, usable_device(torch_device), dtype
+        self.check_actions = check_actions
+        self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs, self.render_mode = int(num_envs), None
         self.single_action_space, self.single_observation_space = world.action_space, world.observation_space
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         t = self._tensor
-        dev = world.device
-        self._mid, self._half = t(dev.mid), t(dev.half)
+        box = world.force_box
+        self._mid, self._half = t(box.mid), t(box.half)
         self._low, self._inv_step = t(table.low_), t(table.inv_step_)
-        self._flat = t(table._flat)
-        self._strides = torch.as_tensor(table._stride_list, dtype=torch.int64, device=self.device)
-        self._bits = torch.as_tensor(table._bits, device=self.device)
-        self._offsets = table._offsets.tolist()           # the corners' row offsets: constants of the step
+        grid = table.grid()
+        self._flat = t(grid.flat)
+        self._strides = torch.as_tensor(grid.strides, dtype=torch.int64, device=self.torch_device)
+        self._bits = torch.as_tensor(grid.bits, device=self.torch_device)
+        self._offsets = list(grid.offsets)           # the corners' row offsets: constants of the step
         self._inv_sqrt, self._sqrt_var, self._b_rest = t(world.inv_sqrt), t(world.sqrt_variance), t(world.b_rest)
-        self._rest_action = t(dev.rest_action.astype(np.float64))
+        self._rest_action = t(box.rest_action.astype(np.float64))
         self._rest_features = t(world.scene.rest_features)
         n, k = self.num_envs, world.k
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
         self._features, self._prev = t(np.empty((n, 4))), t(np.empty((n, 4)))
-        self._t = torch.zeros(n, dtype=torch.int64, device=self.device)
+        self._t = torch.zeros(n, dtype=torch.int64, device=self.torch_device)
         self._agent_cum, self._peak = t(np.zeros(n), sum_dtype("agent_cum", dtype)), t(np.zeros(n))
         self._last_target = t(np.empty((n, k)))
-        self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.torch_device)
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
         # the tensor work of a step, compiled when compile_options asks, recorded when cuda_graph asks
         work = (self._step_tensors if compile_options is None
                 else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
         self._tensor_work = GraphedStep(work, self._prev) if cuda_graph else work
-        if self.device.type == "cuda":
+        if self.torch_device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
             # so CUDA graphs (compile_options={"mode": "reduce-overhead"}) may replay on them, state writes included,
             # without copying them in. (Only CUDA has graphs; importing torch._dynamo costs a second.)
@@ -149,7 +151,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                         torch._dynamo.mark_static_address(value)
 
     def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.device).to(dtype or self.dtype)
+        return torch.as_tensor(np.asarray(value, dtype=np.float64), device=self.torch_device).to(dtype or self.dtype)
 
     # -- gymnasium API --------------------------------------------------------------------------
 
@@ -157,7 +159,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         self._episodes.reset(seed, options)
         self._started, self._clock = True, 0
-        everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
+        everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.torch_device)
         self._start(everyone)
         self._autoreset[:] = False
         return self._observe(self._b, self._episodes.first(), self._features, self._prev), {}
@@ -195,7 +197,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:
-        a = torch.as_tensor(actions, device=self.device)
+        a = torch.as_tensor(actions, device=self.torch_device)
         if self.check_actions:
             if tuple(a.shape) != (self.num_envs, 4):
                 raise ValueError(f"actions must have shape ({self.num_envs}, 4); got {tuple(a.shape)}")
@@ -328,7 +330,7 @@ def usable_device(value: Any) -> torch.device:
         torch.empty(0, device=device)
     except (RuntimeError, AssertionError, TypeError) as exc:
         gpu = "a CUDA device is available" if torch.cuda.is_available() else "no CUDA device is available"
-        raise ValueError(f"device={value!r} is not a torch device usable here ({gpu}; use 'cpu' or a "
+        raise ValueError(f"torch_device={value!r} is not a torch device usable here ({gpu}; use 'cpu' or a "
                          f"'cuda:i' that exists): {exc}") from None
     return device
 

@@ -1,7 +1,7 @@
 """One scene's parts composed into the rules of an episode, shared by the single and batched envs.
 
 :class:`World` holds the immutable :class:`~softenv.envs.scene.Scene` (tissue, shape model,
-response), the device, the dynamics, the target family, the reward weights and the observation
+response), the device's kind, the dynamics, the target family, the reward weights and the observation
 layout. Everything that happens at reset (sampling targets, their shapes, the zero-force and oracle
 reference returns for the normalised score) runs here on arrays with a leading batch axis, so the
 single env (a batch of one) and the batched twin share the code and agree bit for bit. Per-step work
@@ -20,9 +20,9 @@ from gymnasium import spaces
 from .._validation import real_array
 from ..response import TabulatedResponse
 from ..response.exact import TableWork
-from ..devices import device_obs_names
-from ..devices.ideal import IdealDevice
-from .parts import Dynamics, TargetFamily, procedure_schedule
+from ..devices.base import DeviceKind, device_kind
+from ..devices.ideal import ForceBox
+from .task import Dynamics, TargetFamily, procedure_schedule
 from .scene import Scene, build_scene, degrees_to_features
 
 OBS_MODES = ("vector", "dict", "vertices")
@@ -53,9 +53,9 @@ class World:
         self.obs_mode = obs_mode
         self.scene: Scene = build_scene(config)
         scene = self.scene
-        self.device = IdealDevice(scene.workspace)        # the force-feature box in action units
-        self.device_kind = config["device"]["kind"]
-        self.device_obs_size = len(device_obs_names(self.device_kind))
+        self.force_box = ForceBox(scene.workspace)          # action units <-> force features (targets, ideal device)
+        self.device_kind: DeviceKind = device_kind(config["device"]["kind"])
+        self.device_obs_size = len(self.device_kind.obs_names)
         self.k = scene.n_components
         self.obs_size = 2 * self.k + self.device_obs_size + 4     # shapes, device state, previous action
         self._device_end = 2 * self.k + self.device_obs_size
@@ -235,7 +235,7 @@ class World:
         a = real_array(value, name, (4,)).astype(np.float64)
         if not np.isfinite(a).all():
             raise ValueError(f"{name} must be 4 finite numbers in action units [-1, 1], got {value!r}")
-        f = self.device.features(a)
+        f = self.force_box.features(a)
         tol = 1e-9 * (self.family.high - self.family.low + 1e-12)
         if ((f < self.family.low - tol) | (f > self.family.high + tol)).any():
             raise ValueError(f"{name}={a.tolist()} maps to force features {f.tolist()}, outside the target family "

@@ -1,0 +1,165 @@
+"""The device contract: what an env asks of a force device, for one device on Python floats and for a
+batch on arrays.
+
+An env (:class:`softenv.envs.single.SoftSphereEnv`, :class:`softenv.envs.vector.SoftSphereVectorEnv`)
+is the task -- tissue, response, dynamics, targets, reward -- plus a device, chosen by the scene's
+``device.kind`` alone. Each step the env hands the device the checked action; the device returns the
+force features the tissue's response reads (insertion and lateral arc in m, normal and sideways
+force in N), and the normal and sideways force for the force reward. The device then adds its own
+observation slice, its reward terms and info keys, and at an episode's end its episode record
+(the laryngoscope's clinical metrics).
+
+A kind is a :class:`DeviceKind`: its name, its observation names, and factories of the two forms.
+``device.kind`` names a built-in kind (:data:`BUILT_IN`) or, as Gymnasium's entry points do, a
+``"module:attribute"`` whose attribute is a :class:`DeviceKind`, so a new device plugs in through
+the config alone (``examples/probe_device.py``; README "Adding a device").
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol, runtime_checkable
+
+import numpy as np
+
+from ..forces import Workspace
+from ..geometry import SphereMesh
+from ..shape_model import ShapeModel
+from ..tissue import TissueParams
+from .contact import ContactCurve
+
+Config = dict[str, dict[str, Any]]
+
+
+class DeviceScene(Protocol):
+    """What a device may read of the scene (:class:`softenv.envs.scene.Scene` has it)."""
+
+    mesh: SphereMesh
+    tissue: TissueParams
+    shape_model: ShapeModel
+    workspace: Workspace          # the force-feature box the response covers
+
+    @property
+    def rest_features(self) -> np.ndarray: ...       # zero force at the middle of the contact range
+
+    def contact_curve(self, design_force: float) -> ContactCurve: ...
+
+
+@runtime_checkable
+class Device(Protocol):
+    """One device, stepped on Python floats (the single env; a step's budget is microseconds).
+
+    ``obs_names`` names its observation slice (values in [-1, 1]); ``info_keys`` are what :meth:`report`
+    adds to ``info`` every step, ``episode_info_keys`` what :meth:`episode_info` adds at an episode's
+    last step. A device that holds what cannot be pickled (a pymunk space) pickles its :meth:`state`
+    and rebuilds (``__getstate__`` / ``__setstate__``)."""
+
+    obs_names: tuple[str, ...]
+    info_keys: tuple[str, ...]
+    episode_info_keys: tuple[str, ...]
+
+    def reset(self) -> list[float]:
+        """Put the device at rest; returns the previous action an episode starts with (4 floats)."""
+        ...
+
+    def act(self, action: list[float]) -> tuple[list[float], float, float]:
+        """Apply a checked action (4 floats in [-1, 1]) for one control period: the force features on
+        the tissue (within the scene's workspace), and the normal and sideways force (N)."""
+        ...
+
+    def observation(self, features: list[float]) -> list[float]:
+        """The observation slice after the step that produced ``features``."""
+        ...
+
+    def report(self, info: dict[str, Any]) -> float:
+        """Add this step's ``info_keys`` to ``info`` (its reward terms among them); returns the sum of
+        its reward terms."""
+        ...
+
+    def episode_info(self, b: np.ndarray) -> dict[str, Any]:
+        """What ``info`` gets at an episode's last step, given the tissue's shape ``b`` then."""
+        ...
+
+    def drawing(self) -> dict[str, Any] | None:
+        """What a renderer draws of the device beside the tissue (``None``: nothing)."""
+        ...
+
+    def state(self) -> Any:
+        """Everything that a device rebuilt from the scene needs to continue bit for bit."""
+        ...
+
+    def load_state(self, state: Any) -> None:
+        """Continue from :meth:`state`."""
+        ...
+
+
+@runtime_checkable
+class DeviceBatch(Protocol):
+    """``n`` devices stepped together on arrays (the vector env), bit for bit the single device's
+    arithmetic where the kind says so (the ideal device and device 0 of the laryngoscope exactly)."""
+
+    obs_names: tuple[str, ...]
+    info_keys: tuple[str, ...]
+    episode_info_keys: tuple[str, ...]
+
+    def reset(self, mask: np.ndarray) -> np.ndarray:
+        """Put the masked devices at rest; returns the previous action their episodes start with
+        (broadcastable to ``(mask.sum(), 4)``)."""
+        ...
+
+    def act(self, actions: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Apply checked actions ``(n, 4)``; rows outside ``stepped`` hold still (their results are
+        discarded): force features ``(n, 4)``, normal and sideways force ``(n,)``."""
+        ...
+
+    def observation(self, features: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Observation slices of every device (``mask`` None) or of the masked ones; ``features`` are
+        the force features of the same rows."""
+        ...
+
+    def report(self, info: dict[str, Any], stepped: np.ndarray) -> Any:
+        """Add the ``info_keys`` (arrays over all devices) to ``info`` and record the ``stepped`` rows;
+        returns the sum of the reward terms (an array, or 0.0)."""
+        ...
+
+    def episode_info(self, i: int, b: np.ndarray) -> dict[str, Any]:
+        """Device ``i``'s episode-end info, given its tissue shape ``b``."""
+        ...
+
+    def drawing(self, i: int) -> dict[str, Any] | None:
+        """What a renderer draws of device ``i``."""
+        ...
+
+
+@dataclass(frozen=True)
+class DeviceKind:
+    """A kind of device: what ``device.kind`` names. ``single(scene, config)`` and ``batch(scene, config,
+    n)`` build it; ``obs_names`` are known without building it (observation spaces, controllers)."""
+
+    name: str
+    obs_names: tuple[str, ...]
+    single: Callable[[DeviceScene, Config], Device]
+    batch: Callable[[DeviceScene, Config, int], DeviceBatch]
+
+
+# the built-in kinds, as entry points: a kind's module loads when a scene names it (pymunk stays out otherwise)
+BUILT_IN = {"ideal": "softenv.devices.ideal:IDEAL", "laryngoscope": "softenv.devices.laryngoscope:LARYNGOSCOPE"}
+
+
+def device_kind(name: Any, setting: str = "device.kind") -> DeviceKind:
+    """The :class:`DeviceKind` that ``name`` names: a built-in kind or a ``"module:attribute"`` entry point."""
+    allowed = f"allowed: {sorted(BUILT_IN)} or 'module:attribute' naming a softenv.devices.base.DeviceKind"
+    if not isinstance(name, str):
+        raise ValueError(f"{setting}={name!r} must be a string; {allowed}")
+    entry = BUILT_IN.get(name, name)
+    module, _, attribute = entry.partition(":")
+    if not module or not attribute:
+        raise ValueError(f"{setting}={name!r} is not a device kind; {allowed}")
+    try:
+        kind = getattr(importlib.import_module(module), attribute)
+    except (ImportError, AttributeError) as exc:
+        raise ValueError(f"{setting}={name!r} cannot be loaded ({type(exc).__name__}: {exc}); {allowed}") from exc
+    if not isinstance(kind, DeviceKind):
+        raise ValueError(f"{setting}={name!r} names a {type(kind).__name__}, not a DeviceKind; {allowed}")
+    return kind

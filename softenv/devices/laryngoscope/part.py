@@ -1,0 +1,168 @@
+"""The laryngoscope as a part an env composes (the contract of :mod:`softenv.devices.base`), for one
+device and for a batch: the contact's force features clipped to the scene's workspace, the incisor
+reward term, the info keys, and the clinical record of each episode (:mod:`softenv.clinical`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ... import clinical
+from ..base import Config, DeviceScene
+from ..contact import TongueContact
+from . import LARYNGOSCOPE_OBS
+from .batch import LaryngoscopeBatch
+from .params import LaryngoscopeParams
+from .single import Laryngoscope
+
+WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
+INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")
+
+
+def laryngoscope_parts(scene: DeviceScene, config: Config) -> tuple[LaryngoscopeParams, TongueContact]:
+    """The laryngoscope's parameters and its contact law with the scene's tongue."""
+    dev = config["device"]
+    contact = TongueContact(scene.contact_curve(dev["max_normal_force"]), dev["friction"],
+                            wall_stiffness=WALL_FACTOR * dev["coupling_stiffness"])
+    return LaryngoscopeParams.from_config(config), contact
+
+
+def glottic_view(scene: DeviceScene, b: np.ndarray) -> float:
+    """The glottic-view proxy (%) of the tongue's shape ``b`` (:func:`softenv.clinical.glottic_view`)."""
+    vertices = scene.shape_model.decode(b) / scene.tissue.radius
+    return clinical.glottic_view(clinical.sagittal_profile(vertices, scene.mesh.triangles), 1.0)
+
+
+def incisor_term(incisor_force: Any, weights: dict[str, float]) -> Any:
+    """``reward_incisor``: ``-w F_incisor / F_safe`` (any force on the teeth is an error of technique)."""
+    return -weights["incisor_weight"] * (incisor_force / weights["safe_force"])
+
+
+class LaryngoscopePart:
+    """One laryngoscope in an env (:class:`~softenv.devices.base.Device`); ``laryngoscope`` is its
+    physics (:class:`~.single.Laryngoscope`), ``clinical`` its episode's record."""
+
+    obs_names = LARYNGOSCOPE_OBS
+    info_keys = INFO_KEYS
+    episode_info_keys = ("clinical",)
+
+    def __init__(self, scene: DeviceScene, config: Config) -> None:
+        self._scene, self._config = scene, config
+        self.laryngoscope = Laryngoscope(*laryngoscope_parts(scene, config))
+        self._box = (scene.workspace.low, scene.workspace.high)
+        self._rest = scene.rest_features.tolist()
+        self._weights = dict(config["reward"])
+        self.clinical = clinical.ClinicalRecorder(1, config["dynamics"]["dt"], config["task"]["horizon"])
+
+    def reset(self) -> list[float]:
+        self.laryngoscope.reset()
+        self.clinical.start(0, self.laryngoscope.clinical_values())
+        return [0.0, 0.0, 0.0, 0.0]
+
+    def act(self, action: list[float]) -> tuple[list[float], float, float]:
+        dev = self.laryngoscope
+        dev.control_step(action)
+        f = dev.features()
+        P, Q = dev.normal_force, dev.sideways_force
+        if f is None:
+            return self._rest, P, Q
+        lo, hi = self._box
+        return [min(max(x, low), high) for x, low, high in zip(f, lo, hi)], P, Q
+
+    def observation(self, features: list[float]) -> list[float]:
+        return self.laryngoscope.observation()
+
+    def report(self, info: dict[str, Any]) -> float:
+        dev = self.laryngoscope
+        incisor = dev.incisor_force
+        term = incisor_term(incisor, self._weights)
+        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force, "incisor_force_N": incisor,
+                     "haptic_force_N": dev.haptic_force()[0], "blade_pose": dev.blade_pose()[0]})
+        self.clinical.record_one(dev.clinical_values())
+        return term
+
+    def clinical_summary(self, b: np.ndarray) -> dict[str, float]:
+        """The episode's clinical metrics so far, with the tongue's shape ``b`` now."""
+        return self.clinical.summary(0, glottic_view(self._scene, b))
+
+    def episode_info(self, b: np.ndarray) -> dict[str, Any]:
+        return {"clinical": self.clinical_summary(b)}
+
+    def drawing(self) -> dict[str, Any]:
+        return self.laryngoscope.drawing()[0]
+
+    def state(self) -> Any:
+        return self.laryngoscope.state()
+
+    def load_state(self, state: Any) -> None:
+        self.laryngoscope.load_state(state)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["laryngoscope"] = self.state()            # pymunk's space is rebuilt, not pickled
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        device_state = state.pop("laryngoscope")
+        self.__dict__.update(state)
+        self.laryngoscope = Laryngoscope(*laryngoscope_parts(self._scene, self._config))
+        self.load_state(device_state)
+
+
+class LaryngoscopePartBatch:
+    """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`), in one pymunk
+    space (:class:`~.batch.LaryngoscopeBatch`): device 0 equals a single one bit for bit, the others
+    agree to rounding (each sits at its own place in the space)."""
+
+    obs_names = LARYNGOSCOPE_OBS
+    info_keys = INFO_KEYS
+    episode_info_keys = ("clinical",)
+
+    def __init__(self, scene: DeviceScene, config: Config, n: int) -> None:
+        self._scene = scene
+        self.laryngoscopes = LaryngoscopeBatch(*laryngoscope_parts(scene, config), n)
+        self._start_state = self.laryngoscopes.start_state(n)
+        self._workspace = scene.workspace
+        self._rest = scene.rest_features
+        self._weights = dict(config["reward"])
+        self.clinical = clinical.ClinicalRecorder(n, config["dynamics"]["dt"], config["task"]["horizon"])
+
+    def _clinical_values(self) -> np.ndarray:
+        return np.stack(np.broadcast_arrays(*self.laryngoscopes.clinical_values()), axis=1)
+
+    def reset(self, mask: np.ndarray) -> np.ndarray:
+        self.laryngoscopes.load_state(self._start_state, rows=mask)
+        self.clinical.start(mask, self._clinical_values()[mask])
+        return np.zeros(4)
+
+    def act(self, actions: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        dev, box = self.laryngoscopes, self._workspace
+        dev.control_step(actions, moving=stepped)
+        features, touching = dev.features()
+        clipped = np.minimum(np.maximum(features, box.low), box.high)
+        return np.where(touching[:, None], clipped, self._rest), dev.normal_force, dev.sideways_force
+
+    def observation(self, features: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        obs = self.laryngoscopes.observation()
+        return obs if mask is None else obs[mask]
+
+    def report(self, info: dict[str, Any], stepped: np.ndarray) -> np.ndarray:
+        dev = self.laryngoscopes
+        incisor = dev.incisor_force
+        term = incisor_term(incisor, self._weights)
+        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force, "incisor_force_N": incisor,
+                     "haptic_force_N": dev.haptic_force(), "blade_pose": dev.blade_pose()})
+        rows = np.flatnonzero(stepped)
+        self.clinical.record(rows, self._clinical_values()[rows])
+        return term
+
+    def clinical_summary(self, i: int, b: np.ndarray) -> dict[str, float]:
+        """Device ``i``'s episode so far (see :meth:`LaryngoscopePart.clinical_summary`)."""
+        return self.clinical.summary(i, glottic_view(self._scene, b))
+
+    def episode_info(self, i: int, b: np.ndarray) -> dict[str, Any]:
+        return {"clinical": self.clinical_summary(i, b)}
+
+    def drawing(self, i: int) -> dict[str, Any]:
+        return self.laryngoscopes.drawing()[i]

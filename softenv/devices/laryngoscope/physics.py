@@ -1,0 +1,221 @@
+"""The laryngoscope's arithmetic, written once against ``ops`` (Python floats or numpy arrays).
+
+* **Virtual coupling** hand -> blade (Colgate, Stanley & Brown 1995). Translation: two pymunk
+  ``DampedSpring`` s along the hand's axes, each 1 m long at rest. A zero-length spring would damp
+  only along the momentary separation, so its transverse motion would ring undamped; two long
+  orthogonal springs give the stiffness ``k`` in every direction (to second order in the
+  separation over 1 m) and pymunk's implicit damping along both axes. Rotation: a
+  ``DampedRotarySpring``. pymunk integrates them (:mod:`.space`); :func:`coupling_force` reads
+  their pull from the state.
+* **Tongue contact** (computed outside pymunk, applied each substep: :func:`tongue_substep`): the
+  point of the blade's underside nearest the sphere's centre penetrates by ``delta``; the normal
+  force follows :class:`~softenv.devices.contact.TongueContact`, applied along the sphere's normal.
+* **Lateral sweep**: the blade's lateral position ``y`` is a mass on a spring-damper to the hand's
+  lateral position (the same ``k`` and ``c`` as the coupling), and the tongue holds it by the
+  stick-slip law of :class:`TongueContact`: coupled to the sagittal motion through the normal force
+  (the friction limit ``mu P``; no contact, no drag). Integrated as pymunk integrates its springs
+  (explicit springs, implicit damping, symplectic Euler).
+
+pymunk applies a spring's damping implicitly but after its explicit spring impulse (a first-order
+split): the period and decay of a damped oscillation err by about ``0.5 zeta omega h``. The default
+damping ratios (0.14 translational, 0.11 rotational) keep that under 1 % (tested against the
+analytic damped oscillator); heavier damping is stable but less accurate at the same substep.
+
+The single device (:mod:`.single`) runs these functions with :class:`~softenv._ops.ScalarOps` on
+Python floats, the batch (:mod:`.batch`) with :class:`~softenv._ops.ArrayOps` on arrays: the same
+IEEE operations in the same order, so both get the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from ..._ops import ScalarOps
+from ..contact import TongueContact
+from .params import LaryngoscopeParams
+
+CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
+
+
+@dataclass
+class Constants:
+    """Per-scene numbers the substep arithmetic reads (attributes: fast in the scalar path)."""
+
+    R: float
+    h: float
+    inv_m: float
+    inv_I: float
+    h_over_m: float
+    k: float
+    c: float
+    k_t: float
+    mu: float
+    k_ref: float
+    damping: float
+    step: float
+    inv_step: float
+    top: int
+    k_rot: float
+    c_rot: float
+    grip: tuple[float, float]
+    heel: tuple[float, float]
+    tip: tuple[float, float]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+
+
+
+def substep_constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -> Constants:
+    m_eff = p.effective_mass(p.reach())
+    k_explicit = p.explicit_contact_stiffness(contact)
+    damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(k_explicit * m_eff), m_eff / h)
+    low, high = p.hand_box
+    return Constants(R=p.radius, h=h, inv_m=1.0 / p.mass, inv_I=1.0 / p.moment, h_over_m=h / p.mass,
+                      k=p.coupling_stiffness, c=p.coupling_damping, k_t=contact.lateral_stiffness, mu=p.friction,
+                      k_ref=k_explicit, damping=damping, step=contact.step, inv_step=contact.inv_step,
+                      top=contact.top, k_rot=p.rotational_stiffness, c_rot=p.rotational_damping, grip=p.grip,
+                      heel=p.heel, tip=p.tip, low=low, high=high)
+
+
+
+def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: Any) -> tuple[Any, Any, Any]:
+    """The point of the blade's underside (heel to tip) nearest the tongue's centre, and its distance."""
+    hx, hy = c.heel
+    tx, ty = c.tip
+    ex = px + cos_a * hx - sin_a * hy
+    ey = py + sin_a * hx + cos_a * hy
+    dx = (px + cos_a * tx - sin_a * ty) - ex
+    dy = (py + sin_a * tx + cos_a * ty) - ey
+    t = ops.clip(-(ex * dx + ey * dy) / (dx * dx + dy * dy), 0.0, 1.0)
+    cx = ex + t * dx
+    cy = ey + t * dy
+    return cx, cy, ops.sqrt(cx * cx + cy * cy) + 1e-300
+
+
+def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: Constants,
+                    ops: Any) -> tuple[Any, ...]:
+    """One substep of the tongue's contact: the arithmetic both devices share (the single device runs
+    it inlined into its compiled substep loop).
+
+    ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
+    ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
+    substep at its velocity ``hl``. Returns ``(fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor)``:
+    the tongue's push on the blade and its torque, the normal and sideways force, the contact point,
+    and the lateral state after the substep.
+
+    **Normal force**, at the blade's point ``(cx, cy)`` nearest the tongue's centre. The law's
+    stiffness up to ``K_ref`` is explicit; the excess ``K_ex`` (the steepest slope between here and
+    where this substep's approach speed would take the blade), with a critical damper
+    ``c_ex = 2 sqrt(K_ex m)`` so that the stiff barrier does not ring, is applied by backward Euler
+    along the normal, with the blade's effective mass ``m`` there and the coupling's push predicted
+    from the current state: with ``s = K_ex h + c_ex``,
+    ``P (1 + s h / m) = P(delta) + (c + s) v + s h a``, where ``v`` is the approach speed and ``a`` the
+    coupling's acceleration of that point into the tongue. At rest ``a = P / m``, so a held press
+    settles exactly on the law, however stiff it is there; the prediction uses forces of this instant
+    (not the last contact force), so it does not feed energy back.
+
+    **Lateral**: the blade's lateral mass between the hand's spring-damper and the tongue's
+    stick-slip grip, as pymunk integrates its springs: explicit springs, implicit damping, then the
+    position (symplectic Euler; stable for ``omega h < 2``, which the substep keeps below 0.3).
+    """
+    px, py, a, cos_a, sin_a, vx, vy, w = blade
+    lat_y, lat_v, hand_lat, anchor = lateral
+    cx, cy, dist = nearest_point(px, py, cos_a, sin_a, c, ops)
+    touching = dist < c.R
+    if ops is ScalarOps and not touching:       # off the tongue P is 0: the single device skips its arithmetic
+        fx = fy = torque = P = 0.0
+    else:
+        depth = c.R - dist
+        nx = cx / dist
+        ny = cy / dist
+        rx = cx - px
+        ry = cy - py
+        approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)     # speed of that point into the tongue
+        rn = rx * ny - ry * nx
+        inv_meff = c.inv_m + rn * rn * c.inv_I
+        i = ops.index(ops.positive(depth) * c.inv_step, c.top)
+        slope = ops.take(slopes, i)
+        law = ops.take(loads, i) + (depth - i * c.step) * slope
+        ahead = ops.take(slopes, ops.index(ops.positive(depth + c.h * approach) * c.inv_step, c.top))
+        slope = ops.where(ahead > slope, ahead, slope)
+        excess = ops.positive(slope - c.k_ref)
+        # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
+        stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
+        # the coupling's acceleration of the contact point into the tongue, predicted from this instant
+        # (where stiff = 0 it is multiplied by 0)
+        Fx, Fy, tau = coupling_force(blade, hand, c)
+        push = -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
+        beta = stiff * c.h * inv_meff
+        P = ops.positive((law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)) * touching
+        fx = P * nx
+        fy = P * ny
+        torque = rx * fy - ry * fx
+    k_s = c.k_t * touching
+    lat_v = (lat_v + c.h_over_m * (c.k * (hand_lat - lat_y) + c.c * hl - k_s * (lat_y - anchor))) / \
+        (1.0 + c.h_over_m * c.c)
+    lat_y = lat_y + c.h * lat_v
+    stuck = k_s * (lat_y - anchor)
+    limit = c.mu * P
+    Q = ops.clip(stuck, -limit, limit)                         # Coulomb: past mu P the anchor slides
+    anchor = ops.where(touching, ops.where(Q != stuck, lat_y - Q / c.k_t, anchor), lat_y)
+    return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
+
+
+def grip_offset(cos_a: Any, sin_a: Any, c: Constants) -> tuple[Any, Any]:
+    """The grip's offset (m) from the blade's centre of mass, in the world frame."""
+    return cos_a * c.grip[0] - sin_a * c.grip[1], sin_a * c.grip[0] + cos_a * c.grip[1]
+
+
+def coupling_force(blade: tuple, hand: tuple, c: Constants) -> tuple[Any, Any, Any]:
+    """The coupling's force ``(Fx, Fy)`` and torque on the blade now: the hand's springs at the grip
+    and the wrist spring, each with its damper (the hand feels the opposite)."""
+    px, py, a, cos_a, sin_a, vx, vy, w = blade
+    gx, gy, pitch, hvx, hvy, hw = hand
+    qx, qy = grip_offset(cos_a, sin_a, c)
+    Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
+    Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
+    return Fx, Fy, qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
+
+
+def near_walls(pose: tuple[float, ...], velocity: tuple[float, ...], low: tuple[float, ...],
+                high: tuple[float, ...], period: float) -> list[bool]:
+    """For each axis of a hand at ``pose`` moving at ``velocity`` for ``period`` s: whether it comes
+    within 1e-6 (m or rad) of its box. Where it does not, every substep's wall clip returns the
+    velocity unchanged: the clip's bounds ``(low - x) / h`` and ``(high - x) / h`` are ~1e-6 / h away
+    from it, and the rounding of ``x`` is ~1e-17."""
+    return [min(x, x + v * period) < lo + 1e-6 or max(x, x + v * period) > hi - 1e-6
+            for x, v, lo, hi in zip(pose, velocity, low, high)]
+
+
+def hand_command(action: Any, pitch: Any, p: LaryngoscopeParams, ops: Any) -> tuple[Any, Any, Any, Any]:
+    """World velocities ``(vX, vY, spin, v_lateral)`` of the hand for normalised actions, in the hand's
+    frame at the start of the control period: insert along the blade toward its tip, press along the
+    blade's normal into the tongue, sweep toward +y, pitch counter-clockwise (tip down)."""
+    cos_a, sin_a = ops.cos(pitch), ops.sin(pitch)
+    v = p.max_hand_speed
+    return (v * (-action[0] * cos_a + action[1] * sin_a), v * (-action[0] * sin_a - action[1] * cos_a),
+            p.max_pitch_rate * action[3], p.max_sweep_speed * action[2])
+
+
+def hand_action(vX: float, vY: float, spin: float, v_lateral: float, pitch: float,
+                p: LaryngoscopeParams) -> tuple[float, float, float, float]:
+    """The action whose :func:`hand_command` at hand pitch ``pitch`` is the world velocity ``(vX, vY,
+    spin, v_lateral)`` (its exact inverse; not clipped to ``[-1, 1]``)."""
+    cos_a, sin_a = math.cos(pitch), math.sin(pitch)
+    v = p.max_hand_speed
+    return (-(vX * cos_a + vY * sin_a) / v, (vX * sin_a - vY * cos_a) / v, v_lateral / p.max_sweep_speed,
+            spin / p.max_pitch_rate)
+
+
+def contact_features(cx: Any, cy: Any, anchor: Any, P: Any, Q: Any, R: float, ops: Any) -> tuple[Any, Any, Any, Any]:
+    """Force features of the contact: insertion and lateral arc (m), normal and sideways force (N)."""
+    return R * ops.atan2(cy, cx), R * ops.asin(ops.clip(anchor / R, -1.0, 1.0)), P, Q
+
+
+def squash(x: Any) -> Any:
+    """``x / (1 + |x|)``: bounded in (-1, 1), slope 1 at 0, exact arithmetic (no ``tanh``: numpy's and
+    the C library's differ in the last bit)."""
+    return x / (1.0 + abs(x))
+
