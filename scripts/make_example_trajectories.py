@@ -2,9 +2,9 @@
 
     python scripts/make_example_trajectories.py --out examples
 
-``examples/device_logs/``: hand poses as a haptic device records them (softenv.trainee): the scripted
+``examples/device_logs/``: hand poses as a haptic device records them (softenv.training.trainee): the scripted
 expert, and trainees who lever on the teeth, press too hard, hesitate with a tremor, and sweep the
-wrong way. ``examples/trajectories/``: force commands for the ideal device (softenv.scoring).
+wrong way. ``examples/trajectories/``: force commands for the ideal device (softenv.training.scoring).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from softenv.logs import HAND_LOG, save_log
-from softenv.scoring import expert_trajectory, save_trajectory
-from softenv.trainee import degrade, expert_hand_log
+from softenv.training.logs import HAND_LOG, save_log
+from softenv.training.scoring import expert_trajectory, save_trajectory
+from softenv.training.trainee import degrade, expert_hand_log
 
 STYLES = ("expert", "too_forceful", "wrong_direction")
 DEVICE_LOGS = {"expert": {}, "levers_on_teeth": {"lever": 0.3}, "too_forceful": {"overshoot": 8.0},

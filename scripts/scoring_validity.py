@@ -2,9 +2,9 @@
 
     python scripts/scoring_validity.py --out results
 
-The scripted expert's hand log (softenv.trainee.expert_hand_log) degraded by tremor, hesitation,
-levering and overshoot at 5 levels x 20 trainees (softenv.trainee.skill_population), each replayed
-through the laryngoscope and scored (softenv.scoring); then each error alone at its worst amount.
+The scripted expert's hand log (softenv.training.trainee.expert_hand_log) degraded by tremor, hesitation,
+levering and overshoot at 5 levels x 20 trainees (softenv.training.trainee.skill_population), each replayed
+through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount.
 Writes results/scoring_validity.md: the score per level (mean, 95 % bootstrap interval), Spearman's
 rank correlation between skill level and score (target >= 0.9), and which part each error lowers.
 """
@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from softenv.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log
-from softenv.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
+from softenv.training.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log
+from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
 from softenv.bench.timing import code_revision
 
 

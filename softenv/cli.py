@@ -143,7 +143,7 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
 
 
 def cmd_score(args: argparse.Namespace) -> None:
-    from .scoring import score_file
+    from .training.scoring import score_file
 
     scene = {"dynamics": {"kind": "viscoelastic"}} if args.scene == "viscoelastic" else {}
     if args.law != "linear":
@@ -161,7 +161,7 @@ def cmd_score(args: argparse.Namespace) -> None:
 
 def cmd_play(args: argparse.Namespace) -> None:
     try:
-        from . import play
+        from .training import play
     except ImportError as exc:
         raise ValueError(f"softenv play needs pygame (pip install 'softenv[play]'): {exc}") from exc
     if args.headless:

@@ -5,8 +5,8 @@ import numpy as np
 import pygame
 import pytest
 
-from softenv import play
-from softenv.logs import read_log
+from softenv.training import play
+from softenv.training.logs import read_log
 
 
 def _key(key: int, down: bool) -> "pygame.event.Event":

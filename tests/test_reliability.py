@@ -138,7 +138,7 @@ def test_score_reports_every_bad_file_in_one_line_naming_it(tmp_path, capsys):
 
 
 def test_score_refuses_an_existing_file_as_out_before_any_work(tmp_path, capsys, monkeypatch):
-    import softenv.scoring as scoring
+    import softenv.training.scoring as scoring
 
     calls = []
     monkeypatch.setattr(scoring, "replay", lambda *a, **k: calls.append(1))
@@ -149,7 +149,7 @@ def test_score_refuses_an_existing_file_as_out_before_any_work(tmp_path, capsys,
 
 
 def test_replay_and_expert_trajectory_validate_their_arguments():
-    from softenv.scoring import expert_trajectory, replay
+    from softenv.training.scoring import expert_trajectory, replay
 
     good = expert_trajectory(duration_s=1.0)
     for table, message in [(good[::-1], "strictly increasing"), (good[:0], "at least 2 rows"),
@@ -165,7 +165,7 @@ def test_save_trajectory_is_atomic_and_honours_the_umask(tmp_path, monkeypatch):
     import csv as csv_module
     import os
 
-    from softenv.scoring import load_trajectory, save_trajectory, expert_trajectory
+    from softenv.training.scoring import load_trajectory, save_trajectory, expert_trajectory
 
     path = tmp_path / "t.csv"
     table = expert_trajectory(duration_s=1.0)

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softenv.logs import HAND_LOG, save_log
-from softenv.scoring import (COLUMNS, expert_trajectory, load_trajectory, replay, replay_hand, save_trajectory,
+from softenv.training.logs import HAND_LOG, save_log
+from softenv.training.scoring import (COLUMNS, expert_trajectory, load_trajectory, replay, replay_hand, save_trajectory,
                              score_file, score_hand_log)
-from softenv.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
+from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "trajectories"

@@ -2,7 +2,7 @@
 
 :func:`expert_hand_log` runs :class:`softenv.control.HandController` (insert, lift along the handle,
 sweep right) toward the scene's family-centre target and records the hand's pose every control
-period, as a haptic device would (the :data:`softenv.logs.HAND_LOG` schema). :func:`degrade` adds
+period, as a haptic device would (the :data:`softenv.training.logs.HAND_LOG` schema). :func:`degrade` adds
 the errors a trainee makes, each by an amount that grades it (0 = none):
 
 | error | amount | what the hand does |
@@ -25,43 +25,17 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import check_real
-from .devices.laryngoscope.params import LaryngoscopeParams
-from .devices.laryngoscope.physics import hand_action
-from .envs import HAPTIC_SCENES
-from .envs.single import SoftSphereEnv
+from .._validation import check_real
+from ..control import HandController
+from .hand import hand_limits, haptic_config, haptic_env, relative_hand_pose, speed_limited
 
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
 
 
-def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
-    """SoftSphereHaptic-v0's config with ``scene``'s sections merged in."""
-    from .envs.config import scene_config
-
-    return scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], dict(scene or {}), "scene")
-
-
-def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
-    """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
-    scene = dict(scene or {})
-    scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
-    return SoftSphereEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
-
-
-def relative_hand_pose(env: Any) -> np.ndarray:
-    """The hand's pose (x, z, pitch, y) relative to its start pose."""
-    laryngoscope = env.device.laryngoscope
-    gx, gy = laryngoscope.params.grip_start
-    x, z, pitch, y = laryngoscope.hand_pose
-    return np.array([x - gx, z - gy, pitch, y])
-
-
 def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0) -> np.ndarray:
     """The scripted expert's hand log ``(n, 5)`` (``time_s`` and the relative hand pose) toward the
     centre of the scene's laryngoscopy family."""
-    from .control import HandController
-
     check_real(duration_s, "duration_s", 0.1, 600.0)
     dt = haptic_config(scene)["dynamics"]["dt"]
     steps = max(1, int(round(duration_s / dt)))
@@ -81,8 +55,6 @@ def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0
 def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
             lever: float = 0.0, overshoot: float = 0.0, direction: float = 0.0, seed: int = 0) -> np.ndarray:
     """The hand log ``log`` with a trainee's errors (see the module docstring; amounts >= 0)."""
-    from .scoring import hand_limits
-
     for name, value, high in (("tremor", tremor, 5.0), ("hesitation", hesitation, 60.0), ("lever", lever, 0.5),
                               ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
         check_real(value, name, 0.0, high)
@@ -107,19 +79,7 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
         t, pose = _pause(t, pose, hesitation, (moving[0], moving[-1] + 1) if moving.size else (0, len(t) - 1))
     limits = np.array(list(hand_limits(haptic_config(scene)).values()))      # (4, 2): the workspace per column
     low, high = limits[:, 0], limits[:, 1]
-    return np.column_stack([t, _speed_limited(np.clip(pose, low, high), float(t[1] - t[0]), scene)])
-
-
-def _speed_limited(pose: np.ndarray, dt: float, scene: dict[str, Any] | None) -> np.ndarray:
-    """The path a hand on the device follows: each step's move scaled down to the speed limits."""
-    p = LaryngoscopeParams.from_config(haptic_config(scene))
-    out = pose.copy()
-    for k in range(len(pose) - 1):
-        move = pose[k + 1] - out[k]
-        v = move / dt
-        excess = max(1.0, max(abs(a) for a in hand_action(v[0], v[1], v[2], v[3], out[k, 2], p)) * (1.0 + 1e-9))
-        out[k + 1] = out[k] + move / excess
-    return out
+    return np.column_stack([t, speed_limited(np.clip(pose, low, high), float(t[1] - t[0]), scene)])
 
 
 def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -136,7 +96,7 @@ def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, i
 
 # the largest amount of each error (skill level 4 of 4); each trainee draws 0.5-1.5 times its level's share
 WORST = {"tremor": 0.8, "hesitation": 0.4, "lever": 0.3, "overshoot": 6.0}
-# the score part each error lowers (softenv.scoring.HAND_WEIGHTS)
+# the score part each error lowers (softenv.training.scoring.HAND_WEIGHTS)
 LOWERS = {"tremor": "smoothness", "hesitation": "speed", "lever": "teeth", "overshoot": "safety", "direction": "accuracy"}
 
 

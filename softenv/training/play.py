@@ -20,7 +20,7 @@ Controls (the action of SoftSphereHaptic-v0, held while the key is down):
 
 The session runs SoftSphereHaptic-v0's scene toward the family-centre target (the one trainee
 scoring uses), records the hand's pose every control period as a device log
-(:data:`softenv.logs.HAND_LOG`), writes it, and scores it with :func:`softenv.scoring.score_file`,
+(:data:`softenv.training.logs.HAND_LOG`), writes it, and scores it with :func:`softenv.training.scoring.score_file`,
 which replays the log through the same physics: the score is the session's own (tested).
 """
 
@@ -35,9 +35,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import clinical
+from .. import clinical
+from .hand import haptic_config, haptic_env, relative_hand_pose
 from .logs import HAND_LOG, save_log
-from .trainee import haptic_config, haptic_env, relative_hand_pose
+from .scoring import score_file
 
 SIZE = (960, 540)
 SCALE = 2600.0                        # px per metre in the side view
@@ -105,9 +106,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     ``script(step)`` returns pygame events to post before each step (a scripted player, for tests and
     demos); ``realtime=False`` steps as fast as it can.
     """
-    import pygame
-
-    from .scoring import score_file
+    import pygame                       # the play extra: only for a session
 
     config = haptic_config(scene)
     dt = config["dynamics"]["dt"]

@@ -1,26 +1,17 @@
 """Trainee scoring: replay a recorded trajectory through a scene and score it against the expert.
 
-Two kinds of log (:mod:`softenv.logs`: schemas, files, checks): **hand poses**, as a haptic device
+Two kinds of log (:mod:`softenv.training.logs`: schemas, files, checks): **hand poses**, as a haptic device
 records them, replayed through the simulated laryngoscope and tongue (SoftSphereHaptic-v0's scene);
 and **force commands**, replayed through the ideal device (SoftSphere-v0's). Every check runs before
 the replay. The target is the centre of the scene's laryngoscopy family (the same for every
-trainee); the expert is the scripted one (:mod:`softenv.trainee` for hand poses,
+trainee); the expert is the scripted one (:mod:`softenv.training.trainee` for hand poses,
 :func:`expert_trajectory` for force commands).
 
-Score of a hand-pose log (0-100), written out in every report::
-
-    score = 100 (0.3 accuracy + 0.15 speed + 0.15 safety + 0.15 teeth + 0.1 smoothness + 0.15 view)
-    accuracy   = clip(1 - final_error / rest_error, 0, 1)         rest_error: error with no force
-    speed      = clip(expert_time / time_to_target, 0, 1)        0 if the target is never reached
-    safety     = clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1)
-    teeth      = clip(1 - peak_incisor_force / INCISOR_LIMIT_N, 0, 1)    any force on the teeth costs
-    smoothness = clip(expert_sparc / sparc, 0, 1)                SPARC of the hand's speed (0 if undefined)
-    view       = clip((view - rest_view) / (expert_view - rest_view), 0, 1)   glottic-view proxy (%)
-
-Score of a force-command log (no hand, no teeth)::
-
-    score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness)
-    smoothness = clip(expert_jerk / jerk, 0, 1)                 jerk: RMS third derivative of the force (N/s^3)
+Scores run 0-100: a weighted sum of parts, each clipped to [0, 1]. The formulas, part by part, are
+:data:`HAND_FORMULA` (hand-pose logs: accuracy, speed, safety, teeth, smoothness as SPARC of the
+hand's speed, glottic view) and :data:`FORMULA` (force-command logs: accuracy, speed, safety,
+smoothness as the force's jerk), both built from the weights and terms below, and every report
+carries its own.
 
 ``time_to_target``: first time the shape error falls under the scene's tolerance. ``INCISOR_LIMIT_N``
 = 10 N: in manikin studies experts load the upper incisors with a few newtons at most, novices with
@@ -37,28 +28,40 @@ from typing import Any
 
 import numpy as np
 
-from ._artifact import atomic_write
-from ._validation import check_choice, check_real
-from .devices.laryngoscope.params import LaryngoscopeParams
-from .devices.laryngoscope.physics import hand_action
-from .envs.config import make_config
-from .envs.scene import degrees_to_features
-from .envs.single import SoftSphereEnv
+from .. import clinical
+from .._artifact import atomic_write
+from .._validation import check_choice, check_real
+from ..devices.laryngoscope.physics import hand_action
+from ..envs.config import make_config
+from ..envs.scene import degrees_to_features
+from ..envs.single import SoftSphereEnv
+from .hand import hand_actions, haptic_config, haptic_env, relative_hand_pose
 from .logs import FORCE_LOG, HAND_LOG, MAX_DURATION_S, check_limits, check_table, read_log, save_log
+from .trainee import expert_hand_log
 
 COLUMNS = FORCE_LOG.columns
 INCISOR_LIMIT_N = 10.0
+# the score's parts: weights and definitions (force-command logs; hand-pose logs)
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
 HAND_WEIGHTS = {"accuracy": 0.3, "speed": 0.15, "safety": 0.15, "teeth": 0.15, "smoothness": 0.1, "view": 0.15}
-FORMULA = ("score = 100 (0.5 accuracy + 0.2 speed + 0.2 safety + 0.1 smoothness); accuracy = clip(1 - final_error / "
-           "rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) (0 if never reached); safety = "
-           "clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1); smoothness = clip(expert_jerk / jerk, 0, 1)")
-HAND_FORMULA = ("score = 100 (0.3 accuracy + 0.15 speed + 0.15 safety + 0.15 teeth + 0.1 smoothness + 0.15 view); "
-                "accuracy = clip(1 - final_error / rest_error, 0, 1); speed = clip(expert_time / time_to_target, 0, 1) "
-                "(0 if never reached); safety = clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1); "
-                f"teeth = clip(1 - peak_incisor_force / {INCISOR_LIMIT_N:g} N, 0, 1); smoothness = clip(expert_sparc / "
-                "sparc, 0, 1) (SPARC of the hand's speed; 0 if undefined); view = clip((view - rest_view) / "
-                "(expert_view - rest_view), 0, 1) (glottic-view proxy, %)")
+_COMMON = {"accuracy": "clip(1 - final_error / rest_error, 0, 1)",
+           "speed": "clip(expert_time / time_to_target, 0, 1) (0 if never reached)"}
+TERMS = {**_COMMON, "safety": "clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1)",
+         "smoothness": "clip(expert_jerk / jerk, 0, 1)"}
+HAND_TERMS = {**_COMMON, "safety": "clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1)",
+              "teeth": f"clip(1 - peak_incisor_force / {INCISOR_LIMIT_N:g} N, 0, 1)",
+              "smoothness": "clip(expert_sparc / sparc, 0, 1) (SPARC of the hand's speed; 0 if undefined)",
+              "view": "clip((view - rest_view) / (expert_view - rest_view), 0, 1) (glottic-view proxy, %)"}
+
+
+def formula(weights: dict[str, float], terms: dict[str, str]) -> str:
+    """A score's formula in words: the weighted sum, then each part's definition."""
+    total = " + ".join(f"{w:g} {name}" for name, w in weights.items())
+    return "; ".join([f"score = 100 ({total})", *(f"{name} = {terms[name]}" for name in weights)])
+
+
+FORMULA = formula(WEIGHTS, TERMS)
+HAND_FORMULA = formula(HAND_WEIGHTS, HAND_TERMS)
 
 
 @dataclass
@@ -86,7 +89,7 @@ def load_trajectory(path: str | Path) -> np.ndarray:
 
 
 def check_trajectory(table: Any, source: str = "trajectory") -> np.ndarray:
-    """The force-command schema's shared rules on an in-memory table (:func:`softenv.logs.check_table`)."""
+    """The force-command schema's shared rules on an in-memory table (:func:`softenv.training.logs.check_table`)."""
     return check_table(table, FORCE_LOG, source)
 
 
@@ -133,56 +136,10 @@ def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, j
             **extra: Any) -> Replay:
     """The summary of a replayed episode (series in, metrics out)."""
     world, dt = env.world, times[0]
-    ref = math.sqrt(max(float(np.sum((env._target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
+    ref = math.sqrt(max(float(np.sum((env.target_b[0] - world.b_rest) ** 2)), world.floor_sq) / world.n_vertices) * 1e3
     reached = np.flatnonzero(error < world.tolerance * ref)
     return Replay(times, error, force, float(error[-1]), ref, float(times[reached[0]]) if reached.size else None,
                   float(force.max()), float(force.mean()), float(force.sum() * dt), jerk_rms, **extra)
-
-
-def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
-    """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
-
-    p = LaryngoscopeParams.from_config(config)
-    low, high = p.hand_box
-    start = (*p.grip_start, 0.0, 0.0)
-    return {c: (lo - s, hi - s) for c, lo, hi, s in zip(HAND_LOG.columns[1:], low, high, start)}
-
-
-def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
-                 source: str = "trajectory") -> tuple[np.ndarray, np.ndarray]:
-    """Check a hand-pose log against the laryngoscope of ``scene`` and resample it at the control
-    period: returns the control times ``(K,)`` (s, ends of each period) and the poses ``(K + 1, 4)``
-    relative to the start. Errors name the row and column: a pose outside the hand's workspace, or a
-    move faster than the device's speed limits."""
-    from .trainee import haptic_config
-
-    table = check_table(table, HAND_LOG, source)
-    config = haptic_config(scene)
-    relative = table.copy()
-    relative[:, 0] -= table[0, 0]
-    relative[:, 1:] -= table[0, 1:]
-    check_limits(relative, HAND_LOG, hand_limits(config), source)
-    dt = config["dynamics"]["dt"]
-    steps = int(math.floor(relative[-1, 0] / dt + 1e-9))
-    if steps < 1:
-        raise ValueError(f"{source}: row {len(table)}, column 'time_s': the log lasts {relative[-1, 0]:g} s, shorter "
-                         f"than one control period ({dt:g} s)")
-    times = np.arange(steps + 1) * dt
-    poses = np.column_stack([np.interp(times, relative[:, 0], relative[:, j]) for j in range(1, 5)])
-    p = LaryngoscopeParams.from_config(config)
-    names = ("hand_x_m / hand_z_m (along the blade)", "hand_x_m / hand_z_m (across the blade)", "hand_y_m",
-             "hand_pitch_rad")
-    limits = (p.max_hand_speed, p.max_hand_speed, p.max_sweep_speed, p.max_pitch_rate)
-    for k in range(steps):
-        v = (poses[k + 1] - poses[k]) / dt
-        a = hand_action(v[0], v[1], v[2], v[3], poses[k, 2], p)
-        worst = int(np.argmax(np.abs(a)))
-        if abs(a[worst]) > 1.0 + 1e-6:
-            row = int(np.searchsorted(relative[:, 0], times[k + 1] - 1e-12)) + 1
-            raise ValueError(f"{source}: row {row}, column {names[worst]!r}: the hand moves at "
-                             f"{abs(a[worst]) * limits[worst]:.3g} {'rad/s' if worst == 3 else 'm/s'} near "
-                             f"time_s = {table[0, 0] + times[k + 1]:g}; the device allows [0, {limits[worst]:g}]")
-    return times[1:], poses
 
 
 def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory") -> Replay:
@@ -190,8 +147,6 @@ def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: 
     ``scene``'s sections) toward the family centre: each control period the hand is commanded the
     velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
     accumulates)."""
-    from .trainee import haptic_env, relative_hand_pose
-
     times, poses = hand_actions(table, scene, source)
     env = haptic_env(scene, len(times))
     world, p, dt = env.world, env.device.laryngoscope.params, times[0]
@@ -238,7 +193,7 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
 
 
 def save_trajectory(table: np.ndarray, path: str | Path, note: str = "") -> None:
-    """Write a force-command log as CSV (:func:`softenv.logs.save_log`)."""
+    """Write a force-command log as CSV (:func:`softenv.training.logs.save_log`)."""
     save_log(table, path, FORCE_LOG, note)
 
 
@@ -276,9 +231,6 @@ def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, sourc
                    expert: Replay | None = None) -> tuple[dict[str, float], Replay, Replay]:
     """Score an in-memory hand-pose log; returns the parts, the trainee's and the expert's replays
     (pass ``expert`` to reuse one replay over many logs)."""
-    from . import clinical
-    from .trainee import expert_hand_log, haptic_config
-
     trainee = replay_hand(table, scene, source)
     expert = expert or replay_hand(expert_hand_log(scene), scene, "the expert's log")
     config = haptic_config(scene)

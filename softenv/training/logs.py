@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ._artifact import atomic_write
+from .._artifact import atomic_write
 
 LOG_VERSION = 1
 MAX_DURATION_S = 600.0          # ten minutes: any laryngoscopy attempt; longer logs are refused up front

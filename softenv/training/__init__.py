@@ -1,0 +1,8 @@
+"""The trainee wing: a person (or a recorded device) at the laryngoscope, and how well they did.
+
+* :mod:`.logs` -- device logs: the hand-pose and force-command schemas, files and their checks.
+* :mod:`.hand` -- the hand-log vocabulary: a log's scene, poses, workspace and speed limits.
+* :mod:`.trainee` -- the scripted expert's hand log and synthetic trainees (graded errors of technique).
+* :mod:`.scoring` -- replay a log through its scene and score it against the expert (``softenv score``).
+* :mod:`.play` -- a person at the keyboard and mouse (``softenv play``; the ``play`` extra).
+"""
