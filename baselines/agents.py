@@ -38,7 +38,7 @@ def _literal_dict(text: str) -> dict[str, Any]:
 
 def hyperparams(algo: str, env_id: str) -> dict[str, Any]:
     """The YAML hyper-parameters of ``algo`` on ``env_id`` (a fresh dict)."""
-    import yaml
+    import yaml                                             # the rl extra
 
     if algo not in ALGOS:
         raise ValueError(f"unknown agent {algo!r}; valid agents: {list(ALGOS)}")
@@ -71,9 +71,9 @@ def _layout(algo: str, scene: str) -> dict[str, Any]:
 
 
 def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") -> Any:
-    from stable_baselines3.common.vec_env import VecMonitor
+    from stable_baselines3.common.vec_env import VecMonitor  # the rl extra
 
-    from softenv.envs.sb3 import SoftSphereSB3VecEnv
+    from softenv.envs.sb3 import SoftSphereSB3VecEnv        # stable-baselines3: the rl extra
 
     env_id, kwargs = agent_env_kwargs(algo, scene, split)
     # the adapter's default infos: is_success, all SB3 reads (the other terms would cost a dict entry each)
@@ -87,9 +87,9 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     A run that finds checkpoints in ``out_dir`` (and no final model) resumes from the last one; its
     ``agent.json`` lists the env steps it resumed at (``resumed_at``), because a resumed run is not
     bit for bit the same as one that ran through."""
-    import stable_baselines3 as sb3
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
-    from stable_baselines3.common.logger import configure
+    import stable_baselines3 as sb3                         # the rl extra
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback  # the rl extra
+    from stable_baselines3.common.logger import configure   # the rl extra
 
     env_id = scene_kwargs(scene)[0]
     params = hyperparams(algo, env_id)
@@ -105,12 +105,12 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     env = make_training_env(algo, scene, n_envs)
     cls = getattr(sb3, ALGOS[algo][0])
     if params.get("replay_buffer_class") == "HerReplayBuffer":
-        from stable_baselines3 import HerReplayBuffer
+        from stable_baselines3 import HerReplayBuffer       # the rl extra
 
         params["replay_buffer_class"] = HerReplayBuffer
     noise_type, noise_std = params.pop("noise_type", None), params.pop("noise_std", 0.1)
     if noise_type == "normal":
-        from stable_baselines3.common.noise import NormalActionNoise
+        from stable_baselines3.common.noise import NormalActionNoise  # the rl extra
 
         params["action_noise"] = NormalActionNoise(np.zeros(4), noise_std * np.ones(4))
     checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
@@ -156,7 +156,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
 
 def load_agent(path: str | Path, scene: str) -> SB3Policy:
     """Load an agent saved by :func:`train_agent` for ``scene``; another scene or layout is an error."""
-    import stable_baselines3 as sb3
+    import stable_baselines3 as sb3                         # the rl extra
 
     path = Path(path)
     meta_path = path.parent / "agent.json"

@@ -19,8 +19,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+import gymnasium as gym
 import numpy as np
 
+import softenv
+from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 
@@ -133,7 +136,7 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
                     episodes: int) -> AgentResult:
     """Train (or load) one ``ppo-torch`` agent (``baselines/ppo_torch.py``) on the GPU when there is one,
     else on CPU tensors, and evaluate it."""
-    from . import ppo_torch
+    from . import ppo_torch                                 # torch: the rl extra
 
     _torch_single_thread()
     path = Path(run_dir) / "ppo-torch.pt"
@@ -150,7 +153,7 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
 
 
 def torch_device() -> str:
-    import torch
+    import torch                                            # torch: the rl extra
 
     return "cuda" if torch.cuda.is_available() else "cpu"
 
@@ -225,7 +228,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
 
 
 def _torch_ppo_budget() -> int:
-    from .ppo_torch import Args
+    from .ppo_torch import Args                             # torch: the rl extra
 
     return Args.total_timesteps
 
@@ -245,7 +248,7 @@ def _anchored(episodes: Episodes, zero: np.ndarray, oracle: np.ndarray) -> Episo
 
 
 def _torch_single_thread() -> None:
-    import torch
+    import torch                                            # torch: the rl extra
 
     torch.set_num_threads(1)
 
@@ -292,16 +295,12 @@ def format_clinical(summaries: list[dict[str, Any]]) -> str:
 
 
 def provenance(command: str) -> dict[str, Any]:
-    import gymnasium
-    import stable_baselines3
-    import torch
-
-    import softenv
-    from softenv.bench.timing import code_revision, machine_info
+    import stable_baselines3                  # the rl extra: only when a report is written
+    import torch                                            # torch: the rl extra
 
     machine = machine_info()  # the BLAS kernels are named because they change the bits of every product
     return {"command": command, "code": code_revision(), "softenv": softenv.__version__, "numpy": np.__version__,
-            "gymnasium": gymnasium.__version__, "stable_baselines3": stable_baselines3.__version__,
+            "gymnasium": gym.__version__, "stable_baselines3": stable_baselines3.__version__,
             "torch": torch.__version__, "python": platform.python_version(),
             "machine": f"{machine['cpu']} ({platform.machine()}, {machine['logical_cores']} cores, OpenBLAS "
                        f"{machine['openblas_kernels']} kernels)",
@@ -357,10 +356,10 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
 
 def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
            curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str, stem: str) -> None:
-    import matplotlib
+    import matplotlib                                       # the viz extra
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt                         # the viz extra
 
     # one panel per scene in a grid; every policy keeps its colour and marker across panels, and the
     # names sit in one legend below the grid (point labels would overlap where policies agree)
@@ -435,8 +434,6 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
 
 def _gallery(path: Path, command: str, plt: Any) -> None:
     """Final shapes against targets on one test episode of SoftSphere-v0, for a few baselines."""
-    import gymnasium as gym
-
     names = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle"]
     env_id, kwargs = scene_kwargs("SoftSphere-v0")
     kwargs.pop("obs_mode")

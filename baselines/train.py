@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--timesteps", type=int, default=None, help="override the YAML budget")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
-    import torch
+    import torch                                            # torch: the rl extra
 
     torch.set_num_threads(1)
     path = train_agent(args.algo, args.scene, args.seed, args.out, args.timesteps)

@@ -7,10 +7,22 @@ and exit status 2, not a traceback.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
+
+from baselines import benchmark
+
+from . import bench
+from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
+from .parallel import Job, run_jobs, usable_cores
+from .response import REGRESSORS, MinMaxScaler, make_response
+from .shape_model import ShapeModel
+from .training import play
+from .training.scoring import score_file
 
 
 def _component_rule(text: str) -> int | float | str:
@@ -31,8 +43,6 @@ def _component_rule(text: str) -> int | float | str:
 
 
 def cmd_data(args: argparse.Namespace) -> None:
-    from .parallel import Job, run_jobs
-
     jobs = [Job(f"{law} {n} points", _paper_data_job,
                 (n, args.deformations, args.magnitudes, law, args.noise, args.seed, args.out))
             for law in args.laws for n in args.points]
@@ -47,8 +57,6 @@ def cmd_data(args: argparse.Namespace) -> None:
 def _paper_data_job(n: int, deformations: int, magnitudes: int, law: str, noise: float, seed: int,
                     out: str | None) -> str:
     """One paper data set (built or read from the cache; copied to ``out``): its table row."""
-    from .datasets import paper_dataset
-
     d = paper_dataset(n, deformations, magnitudes, law=law, noise=noise, seed=seed)
     where = "(cache)"
     if out is not None:
@@ -59,9 +67,6 @@ def _paper_data_job(n: int, deformations: int, magnitudes: int, law: str, noise:
 
 
 def cmd_fit(args: argparse.Namespace) -> None:
-    from .datasets import ForceShapeData, paper_dataset
-    from .shape_model import ShapeModel
-
     data = (ForceShapeData.load(args.data) if args.data else
             paper_dataset(args.points, args.deformations, args.magnitudes, law=args.law, noise=args.noise, seed=args.seed))
     noise_std = args.noise_std if args.noise_std is not None else (data.noise_std or None)
@@ -81,11 +86,6 @@ def cmd_fit(args: argparse.Namespace) -> None:
 
 def fit_response(args: argparse.Namespace, data, shape_model) -> None:
     """Fit a regressor force -> b on a split of the data and report its test error."""
-    import time
-
-    from .datasets import split_by_contact, split_rows
-    from .response import MinMaxScaler, make_response
-
     split = split_rows(data.n_samples, seed=args.seed) if args.split == "rows" else split_by_contact(data.contact_ids, seed=args.seed)
     b = shape_model.encode(data.shapes)
     model = make_response(args.response, seed=args.seed)
@@ -105,23 +105,17 @@ def fit_response(args: argparse.Namespace, data, shape_model) -> None:
 
 
 def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
-    from . import bench
-
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
     bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv), device=args.device)
 
 
 def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
-    from . import bench
-    from .parallel import usable_cores
-
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
-    try:
-        from baselines import benchmark
-    except ImportError as exc:
-        raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {exc}") from exc
+    missing = [name for name in ("stable_baselines3", "torch", "matplotlib") if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {missing} missing")
     plan = benchmark.quick_plan() if args.quick else benchmark.full_plan()
     if args.scenes:
         plan.scenes = args.scenes
@@ -143,8 +137,6 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
 
 
 def cmd_score(args: argparse.Namespace) -> None:
-    from .training.scoring import score_file
-
     scene = {"dynamics": {"kind": "viscoelastic"}} if args.scene == "viscoelastic" else {}
     if args.law != "linear":
         scene["tissue"] = {"law": args.law}
@@ -160,18 +152,14 @@ def cmd_score(args: argparse.Namespace) -> None:
 
 
 def cmd_play(args: argparse.Namespace) -> None:
-    try:
-        from .training import play
-    except ImportError as exc:
-        raise ValueError(f"softenv play needs pygame (pip install 'softenv[play]'): {exc}") from exc
+    if importlib.util.find_spec("pygame") is None:
+        raise ValueError("softenv play needs pygame (pip install 'softenv[play]')")
     if args.headless:
         play.headless()
     play.run(args.seconds, args.out)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .response import REGRESSORS
-
     parser = argparse.ArgumentParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
 

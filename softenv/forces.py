@@ -166,7 +166,7 @@ def unit_samples(n: int, dims: int, method: str = "lhs", seed: int = 0) -> np.nd
         strata = np.stack([rng.permutation(n) for _ in range(dims)], axis=1)
         return (strata + rng.random((n, dims))) / n
     try:
-        from scipy.stats import qmc
+        from scipy.stats import qmc                         # scipy: the fem extra
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise ImportError("method='sobol' needs scipy: pip install 'softenv[fem]'") from exc
     return qmc.Sobol(dims, scramble=True, seed=rng).random(n)

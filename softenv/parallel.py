@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -102,8 +103,6 @@ def pin_threads() -> None:
     """One BLAS/OpenMP/torch thread in this process (BLAS reads its variables when it loads, so they
     are also set for the processes started from here)."""
     os.environ.update({name: "1" for name in THREAD_VARS})
-    import sys
-
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(1)
 
@@ -151,7 +150,7 @@ def _run_pool(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progre
 
 def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progress") -> list[JobResult]:
     try:
-        import ray
+        import ray                                          # the ray extra
     except ImportError as exc:
         raise ValueError(f"executor='ray' needs Ray: pip install 'softenv[ray]' ({exc})") from exc
     started_here = not ray.is_initialized()

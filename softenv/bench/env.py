@@ -150,7 +150,7 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
     interleaved so that both see the same machine load; the ratio is of the medians. The target (issue
     14: within 1.3x) is the default adapter's; ``info_keys='all'`` is timed beside it, for its cost."""
     try:
-        from ..envs.sb3 import SoftSphereSB3VecEnv
+        from ..envs.sb3 import SoftSphereSB3VecEnv          # stable-baselines3: the rl extra
     except ImportError as exc:
         return [Row("sb3", f"SB3 adapter: skipped ({exc})", float("nan"), "", target="install softenv[rl]", ok=None)]
     rows = []
@@ -267,7 +267,7 @@ def bench_gpu(quick: bool, reference: Timing) -> list[Row]:
 def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
     """The rows of :func:`bench_gpu` on ``device`` (named ``name``); the host-sync check runs on CUDA
     only (``torch.cuda.set_sync_debug_mode``), elsewhere its row says so."""
-    import torch
+    import torch                                            # torch: the rl extra
 
     numpy_rate = 1024 / twin_step_timing("SoftSphere-v0", 1024, calls, autoreset_mode="same_step").median
     rows = [Row("gpu", "SoftSphere-v0: numpy twin on one CPU core, 1024 envs", numpy_rate, "env-steps/s")]
@@ -315,7 +315,7 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
     ``"reduce-overhead"``, and any timing with ``cuda_graph``, go through the env itself: its ``compile_options``
     and ``cuda_graph``)."""
-    import torch
+    import torch                                            # torch: the rl extra
 
     if mode is not None:
         # dynamo caches graphs per code object, not per env: without a reset a later size would run an
@@ -369,14 +369,14 @@ def _torch_twin(n: int, device: str, dtype: Any, draw: str, **kwargs: Any) -> An
 
 def _synchronize(device: str) -> None:
     if device == "cuda":
-        import torch
+        import torch                                        # torch: the rl extra
 
         torch.cuda.synchronize()
 
 
 def _torch_or_none() -> Any:
     try:
-        import torch
+        import torch                                        # torch: the rl extra
     except ImportError:
         return None
     return torch

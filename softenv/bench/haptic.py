@@ -94,8 +94,8 @@ def extreme_rows(quick: bool) -> list[Row]:
     on the teeth is pushed out of their overlap by pymunk's contact, at most the incisor force times
     the collision slop)."""
     from ..devices.laryngoscope.part import laryngoscope_parts       # pymunk: only for this section
-    from ..devices.laryngoscope.single import Laryngoscope
-    from ..devices.laryngoscope.space import COLLISION_SLOP
+    from ..devices.laryngoscope.single import Laryngoscope  # pymunk
+    from ..devices.laryngoscope.space import COLLISION_SLOP  # pymunk
 
     rows = []
     for name, sections in EXTREMES.items():

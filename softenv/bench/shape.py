@@ -98,7 +98,7 @@ def run_large_fit(n_samples: int, grid: int, k: int) -> dict[str, float]:
 
 
 def _large_fit_main(n_samples: int, grid: int, k: int) -> None:
-    import resource
+    import resource                                         # Unix only
 
     mesh = latlong_mesh(grid)
     tissue = AnalyticTissue(mesh, TissueParams())

@@ -11,7 +11,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+import gymnasium as gym
 import numpy as np
+
+import softenv
 
 from .._blas import openblas_kernels
 
@@ -132,11 +135,10 @@ def blas_advice() -> str | None:
 def machine_info() -> dict[str, Any]:
     """What the numbers were measured on."""
     cpu = _cpuinfo()
-    import gymnasium
 
     return {"cpu": cpu.get("model name", platform.processor() or "unknown"),
             "cpu_family": cpu.get("cpu family", "unknown"), "logical_cores": os.cpu_count(),
-            "python": platform.python_version(), "numpy": np.__version__, "gymnasium": gymnasium.__version__,
+            "python": platform.python_version(), "numpy": np.__version__, "gymnasium": gym.__version__,
             "platform": platform.platform(), "blas_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset"),
             "openblas_kernels": openblas_kernels(), "OPENBLAS_CORETYPE": os.environ.get("OPENBLAS_CORETYPE", "unset")}
 
@@ -159,7 +161,6 @@ def gym_step_timing(env: Any, actions: list, steps: int, repeats: int = 5, seed:
 
 def cartpole_steps_per_second(steps: int = 100_000, seed: int = 0) -> Timing:
     """Gymnasium's CartPole-v1 through ``gym.make`` with pre-sampled actions: the in-process reference."""
-    import gymnasium as gym
 
     env = gym.make("CartPole-v1")
     actions = np.random.default_rng(seed).integers(0, 2, size=4096).tolist()
@@ -182,7 +183,6 @@ def code_revision(root: Path | None = None) -> str:
     """The git commit the package runs from, ``+ uncommitted changes`` when its code differs from it
     (docs and results do not count), so that a report names the code that made it; outside a checkout
     (an installed wheel, or a tree that is not its own git root) the package version."""
-    import softenv
 
     root = Path(softenv.__file__).resolve().parent.parent if root is None else root
     fallback = f"softenv {softenv.__version__} (not a git checkout)"

@@ -14,6 +14,7 @@ from typing import Any
 import gymnasium as gym
 
 from .config import default_config, describe_config, make_config
+from .wrappers import NumpyInfo
 
 # ideal-device ids -> scene overrides; each steps 100 times per episode (task.horizon's default)
 ENV_SCENES: dict[str, dict[str, Any]] = {
@@ -40,15 +41,6 @@ def register_envs() -> None:
                      vector_entry_point="softenv.envs.make:make_vector_env",
                      max_episode_steps=scene.get("task", {}).get("horizon", MAX_EPISODE_STEPS),
                      kwargs={"base_scene": scene})
-
-
-def __getattr__(name: str) -> Any:
-    # the wrappers load on first use, like the env modules (import softenv stays light)
-    if name == "NumpyInfo":
-        from .wrappers import NumpyInfo
-
-        return NumpyInfo
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config",

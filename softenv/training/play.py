@@ -152,7 +152,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
 
 def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, steps: int, dt: float) -> None:
     """The side view (tongue midline, blade, incisors, hand) and the gauges."""
-    import pygame
+    import pygame                                           # the play extra
 
     def px(x: float, y: float) -> tuple[int, int]:
         return int(ORIGIN[0] + SCALE * x), int(ORIGIN[1] - SCALE * y)

@@ -304,10 +304,10 @@ def _markdown(report: dict[str, Any]) -> str:
 
 
 def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
-    import matplotlib
+    import matplotlib                                       # the viz extra
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt                         # the viz extra
 
     panels = 3 if trainee.incisor_N is not None else 2
     fig, axes = plt.subplots(panels, 1, figsize=(6, 1.9 * panels + 0.8), sharex=True)
