@@ -33,7 +33,7 @@ def _literal_dict(text: str) -> dict[str, Any]:
     node = ast.parse(text, mode="eval").body
     if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args):
         raise ValueError(f"expected dict(key=literal, ...), got {text!r}")
-    return {kw.arg: ast.literal_eval(kw.value) for kw in node.keywords}
+    return {str(kw.arg): ast.literal_eval(kw.value) for kw in node.keywords}
 
 
 def hyperparams(algo: str, env_id: str) -> dict[str, Any]:

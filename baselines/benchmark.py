@@ -377,7 +377,7 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
         ax.set_xlabel("decision time per step (us)")
         ax.set_ylabel("final shape error (mm)")
         ax.set_title(scene, fontsize=8)
-    handles = {}
+    handles: dict[str, Any] = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)

@@ -82,7 +82,7 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int]
     venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", max_episode_steps=horizon,
                         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
     policy.reset()
-    obs, _ = venv.reset(seed=seed)
+    obs, _ = venv.reset(seed=seed)  # type: ignore[arg-type]  # SoftSphere's vector env takes a seed per env
     done = np.zeros(episodes, dtype=bool)
     first_success = np.full(episodes, np.nan)
     error_sum = np.zeros(episodes)                 # the episode's summed RMS shape error (mm x steps)

@@ -60,7 +60,7 @@ class _RowPolicy:
         self.world = world
         self.k = world.k
         self.device = world.config["device"]["kind"] == "laryngoscope"
-        self.controller = HandController(world.config) if self.device else None
+        self.controller = HandController(world.config)     # used with the laryngoscope only
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -232,6 +232,7 @@ class SB3Policy:
         self.model = model
         self.name = name
         self.resumed_at: list[int] = []            # env steps its training resumed at (agents.load_agent)
+        self.obs_mode = "vector"                   # the observations it was trained on (agents.load_agent sets it)
 
     def reset(self) -> None:
         pass

@@ -76,6 +76,10 @@ class Args:
 class RunningNorm(nn.Module):
     """Observation mean and variance (Chan et al.'s parallel update), kept as buffers on the device."""
 
+    mean: torch.Tensor
+    var: torch.Tensor
+    count: torch.Tensor
+
     def __init__(self, size: int) -> None:
         super().__init__()
         self.register_buffer("mean", torch.zeros(size, dtype=torch.float64))

@@ -33,7 +33,7 @@ def save_artifact(path: str | os.PathLike, kind: str, version: int,
         if a.dtype.kind == "O":
             raise ValueError(f"artifact array {name!r} has dtype object, which cannot be saved without pickle")
     payload[_META_KEY] = np.array(json.dumps(header, sort_keys=True))
-    return atomic_write(path, lambda handle: np.savez(handle, **payload))
+    return atomic_write(path, lambda handle: np.savez(handle, **payload))  # type: ignore[arg-type]  # (stub: **kwds)
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], Any], text: bool = False) -> Path:
@@ -45,7 +45,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], Any], text:
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "w" if text else "wb", **({"newline": ""} if text else {})) as handle:
+        with (os.fdopen(fd, "w", newline="") if text else os.fdopen(fd, "wb")) as handle:
             write(handle)
         os.replace(tmp, path)
     except BaseException:

@@ -14,9 +14,42 @@ from __future__ import annotations
 
 import math
 import operator
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
+
+
+class Ops(Protocol):
+    """The elementwise operations the task's formulas use (:mod:`softenv.envs.task`), on any numbers:
+    :class:`ScalarOps` (Python floats), :class:`ArrayOps` (numpy), the torch twin's ``TorchOps``.
+    Implemented by classes of static methods; the class itself is the ``ops`` argument."""
+
+    def sqrt(self, x: Any, /) -> Any: ...
+
+    def positive(self, x: Any, /) -> Any: ...
+
+    def clip(self, x: Any, low: Any, high: Any, /) -> Any: ...
+
+    def stack(self, columns: list[Any], /) -> Any: ...
+
+
+class PhysicsOps(Ops, Protocol):
+    """:class:`Ops` and what the laryngoscope's contact arithmetic needs besides
+    (:mod:`softenv.devices.laryngoscope.physics`): Python floats and numpy."""
+
+    def cos(self, x: Any, /) -> Any: ...
+
+    def sin(self, x: Any, /) -> Any: ...
+
+    def atan2(self, y: Any, x: Any, /) -> Any: ...
+
+    def asin(self, x: Any, /) -> Any: ...
+
+    def where(self, condition: Any, a: Any, b: Any, /) -> Any: ...
+
+    def index(self, x: Any, top: int, /) -> Any: ...
+
+    def take(self, values: Any, i: Any, /) -> Any: ...
 
 
 class ScalarOps:
@@ -46,6 +79,11 @@ class ScalarOps:
         return int(x) if x < top else top
 
     take = staticmethod(operator.getitem)          # values[i], without a Python frame
+
+    @staticmethod
+    def stack(columns: list[float]) -> list[float]:
+        """The columns of one row: the values themselves."""
+        return list(columns)
 
 
 class ArrayOps:

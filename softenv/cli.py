@@ -36,7 +36,8 @@ def _component_rule(text: str) -> int | float | str:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--components {text!r}: use scree, kneedle, noise, a fraction in (0, 1) or an int")
+        raise argparse.ArgumentTypeError(
+            f"--components {text!r}: use scree, kneedle, noise, a fraction in (0, 1) or an int") from None
     if not 0 < value < 1:
         raise argparse.ArgumentTypeError(f"--components {text!r}: a variance fraction must lie in (0, 1)")
     return value
@@ -84,7 +85,7 @@ def cmd_fit(args: argparse.Namespace) -> None:
         fit_response(args, data, model)
 
 
-def fit_response(args: argparse.Namespace, data, shape_model) -> None:
+def fit_response(args: argparse.Namespace, data: ForceShapeData, shape_model: ShapeModel) -> None:
     """Fit a regressor force -> b on a split of the data and report its test error."""
     split = split_rows(data.n_samples, seed=args.seed) if args.split == "rows" else split_by_contact(data.contact_ids, seed=args.seed)
     b = shape_model.encode(data.shapes)

@@ -139,8 +139,8 @@ class ClinicalRecorder:
         self.log = np.zeros((horizon + 1, n, len(COLUMNS)))
         self.steps = np.zeros(n, dtype=np.int64)
 
-    def start(self, rows: Any, values: np.ndarray) -> None:
-        """Begin episodes of these devices with their rest values ``(len(rows), 7)``."""
+    def start(self, rows: Any, values: np.ndarray | tuple[float, ...]) -> None:
+        """Begin episodes of these devices with their rest values ``(len(rows), 7)`` (a single env's: a tuple)."""
         self.steps[rows] = 0
         self.log[0, rows] = values
 

@@ -156,7 +156,7 @@ def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progres
     started_here = not ray.is_initialized()
     if started_here:
         env = {"env_vars": {name: "1" for name in THREAD_VARS}}
-        local = {} if os.environ.get("RAY_ADDRESS") else {"num_cpus": n_jobs, "include_dashboard": False}
+        local: dict[str, Any] = {} if os.environ.get("RAY_ADDRESS") else {"num_cpus": n_jobs, "include_dashboard": False}
         ray.init(runtime_env=env, log_to_driver=False, **local)
     # _attempt catches the job's exception, so retry here on a failed result; Ray itself retries a task
     # whose worker or node died (max_retries)

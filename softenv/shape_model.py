@@ -19,6 +19,7 @@ import math
 import os
 from collections import OrderedDict
 from statistics import NormalDist
+from typing import Any
 
 import numpy as np
 
@@ -125,7 +126,7 @@ class ShapeModel:
             return check_int(k, "n_components", 1)
         return None
 
-    def _randomized(self, X: np.ndarray, mean: np.ndarray, fixed_k: int | None):
+    def _randomized(self, X: np.ndarray, mean: np.ndarray, fixed_k: int | None) -> tuple[np.ndarray, float, Any]:
         """Halko et al. randomized SVD of ``X - 1 mean`` without forming it."""
         n, p = X.shape
         k = fixed_k if fixed_k is not None else min(self.max_components, n - 1)
@@ -154,7 +155,8 @@ class ShapeModel:
             total += float(np.einsum("ij,ij->", block, block))
         return s ** 2 / (n - 1), total / (n - 1), lambda m: Vt[:m]
 
-    def _set_state(self, mean, components, spectrum, total, k, rule, picks, n, mesh_spec, noise_std) -> None:
+    def _set_state(self, mean: Any, components: Any, spectrum: Any, total: float, k: int, rule: str, picks: Any,
+                   n: int, mesh_spec: Any, noise_std: float | None) -> None:
         self.mean_ = np.ascontiguousarray(mean, dtype=np.float64)
         self.components_ = np.ascontiguousarray(components, dtype=np.float64)
         self.spectrum_ = np.asarray(spectrum, dtype=np.float64)
@@ -168,10 +170,15 @@ class ShapeModel:
         self.noise_std_ = None if noise_std is None else float(noise_std)
         self._components32 = self.components_.astype(np.float32)
         self._mean32 = self.mean_.astype(np.float32)
-        self._augmented = {np.dtype(np.float64): np.vstack([self.mean_, self.components_]),
+        self._augmented: dict[np.dtype, np.ndarray] = {np.dtype(np.float64): np.vstack([self.mean_, self.components_]),
                            np.dtype(np.float32): np.vstack([self._mean32, self._components32])}
         self._zeros = {dtype: np.zeros(self.n_components_, dtype) for dtype in self._augmented}
-        self._subsets: OrderedDict[bytes, dict] = OrderedDict()
+        self._subsets: OrderedDict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = OrderedDict()
+
+    def augmented(self, dtype: Any = np.float64) -> np.ndarray:
+        """``[mean; components]``, ``(k + 1, p)`` in ``dtype`` (float64 or float32): the one matrix that
+        :meth:`decode` multiplies ``[1, b]`` by (read-only; benchmarks time products with it)."""
+        return self._augmented[np.dtype(dtype)]
 
     # -- encoding and decoding --------------------------------------------------------------------
 
@@ -243,7 +250,7 @@ class ShapeModel:
                 np.dot(lifted[start:stop], aug, out=out[start:stop])
         return out
 
-    def _subset(self, vertices: np.ndarray, dtype: np.dtype):
+    def _subset(self, vertices: np.ndarray, dtype: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v = check_array(vertices, "vertices", ndim=1, dtype=np.int64)
         n_vertices = self.n_features_ // 3
         if v.size and (v.min() < 0 or v.max() >= n_vertices):
@@ -377,7 +384,7 @@ class ShapeModel:
         return f"ShapeModel(n_components={self.n_components!r}, solver={self.solver!r})"
 
 
-def _exact_pca(X: np.ndarray, mean: np.ndarray, solver: str):
+def _exact_pca(X: np.ndarray, mean: np.ndarray, solver: str) -> tuple[np.ndarray, float, Any]:
     """Spectrum (covariance eigenvalues), total variance, and ``leading(k)``: the first k right
     singular vectors as rows (computed on demand: the Gram route forms only the k it is asked for)."""
     n = X.shape[0]

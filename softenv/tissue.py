@@ -213,7 +213,7 @@ class AnalyticTissue:
                              f"points must lie on the sphere of radius {R:g} m (to within {_CONTACT_TOLERANCE:.0e} R)")
         return c * (R / dist)[:, None], f
 
-    def _raw_amplitudes(self, n_c: np.ndarray, forces: np.ndarray):
+    def _raw_amplitudes(self, n_c: np.ndarray, forces: np.ndarray) -> Any:
         p = self.params
         P = -np.einsum("bi,bi->b", forces, n_c)           # compressive normal load, N
         Q = forces + P[:, None] * n_c                      # tangential load vector, N

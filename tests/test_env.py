@@ -338,7 +338,7 @@ def test_sb3_adapter_reports_terminal_observations():
     venv = SoftSphereSB3VecEnv(num_envs=2, info_keys="all")
     venv.seed(0)
     venv.reset()
-    for t in range(100):
+    for _ in range(100):
         obs, rewards, dones, infos = venv.step(np.zeros((2, 4), np.float32))
     assert dones.all()
     assert all(info["TimeLimit.truncated"] and info["terminal_observation"].shape == obs.shape[1:] for info in infos)

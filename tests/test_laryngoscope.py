@@ -35,7 +35,7 @@ def make_device(**sections) -> Laryngoscope:
 
 def coupling_pull(dev: Laryngoscope) -> np.ndarray:
     """The coupling's translational force on the blade, ``k (hand - grip)``, from the state alone."""
-    x, y, a, *_, gx, gy, _ = dev._kinematics()
+    x, y, a, *_, gx, gy, _ = dev.kinematics()
     qx, qy = dev.params.grip
     grip = np.array([x + math.cos(a) * qx - math.sin(a) * qy, y + math.sin(a) * qx + math.cos(a) * qy])
     return dev.params.coupling_stiffness * (np.array([gx, gy]) - grip)
@@ -180,7 +180,7 @@ def test_full_speed_into_teeth_or_tongue_stays_finite_and_never_tunnels(name, ac
     steps = 250 if dev.n_substeps < 100 else 12               # a whole episode, or 0.25 s at 2,000 substeps
     for _ in range(steps):
         dev.control_step(action)
-        assert all(math.isfinite(v) for v in dev._kinematics()) and math.isfinite(dev.normal_force)
+        assert all(math.isfinite(v) for v in dev.kinematics()) and math.isfinite(dev.normal_force)
         # the incisors stay outside the blade (to pymunk's slop plus a fraction of a millimetre)
         assert dev.incisor_clearance() > -1e-3
         # the blade never passes the tongue's saturation barrier (80 % of the radius)

@@ -261,7 +261,7 @@ def test_table_is_exact_for_affine_functions_and_converges_quadratically():
     low, high = np.array([0.0, -1.0, 2.0]), np.array([1.0, 1.0, 5.0])
     A = np.array([[1.0, -2.0], [0.5, 3.0], [-1.0, 0.25]])
     nodes = (5, 3, 4)
-    axes = [np.linspace(l, h, n) for l, h, n in zip(low, high, nodes)]
+    axes = [np.linspace(lo, hi, n) for lo, hi, n in zip(low, high, nodes)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     table = TabulatedResponse(low, high, grid @ A + 1.5)
     x = np.random.default_rng(7).uniform(low, high, (200, 3))

@@ -38,8 +38,8 @@ def test_examples_are_made_by_the_committed_script(tmp_path):
     made = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*.csv"))
     assert made == sorted(p.relative_to(ROOT / "examples") for p in (ROOT / "examples").rglob("*.csv"))
     for rel in made:
-        ours = [l for l in (tmp_path / rel).read_text().splitlines() if not l.startswith("#")]
-        shipped = [l for l in (ROOT / "examples" / rel).read_text().splitlines() if not l.startswith("#")]
+        ours = [line for line in (tmp_path / rel).read_text().splitlines() if not line.startswith("#")]
+        shipped = [line for line in (ROOT / "examples" / rel).read_text().splitlines() if not line.startswith("#")]
         assert ours == shipped, rel
 
 

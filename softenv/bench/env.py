@@ -30,7 +30,7 @@ def bench_env(quick: bool, reference: Timing) -> list[Row]:
     env = gym.make("SoftSphere-v0")
     rows.append(Row("env", "SoftSphere-v0: first gym.make in this process (scene from the disk cache or built)",
                     time.perf_counter() - t0, "s"))
-    scene = env.unwrapped.world.scene
+    scene = env.get_wrapper_attr("world").scene
     err = scene.response_error(n=500)
     rows.append(Row("env", "exact response: table vs direct analytic tissue, surface RMS error",
                     err["median_mm"], "mm (median)", f"p99 {err['p99_mm']:.4f}, max {err['max_mm']:.4f} mm",
@@ -60,7 +60,7 @@ def _fem_rows(quick: bool) -> list[Row]:
     t0 = time.perf_counter()
     fem = gym.make("SoftSphere-v0", tissue={"model": "fem"})
     build = time.perf_counter() - t0
-    scene = fem.unwrapped.world.scene
+    scene = fem.get_wrapper_attr("world").scene
     err = scene.response_error()
     rows = [Row("env", "SoftSphere-v0, tissue fem: first gym.make in this process (shipped FE data; fits cached)",
                 build, "s"),
@@ -240,7 +240,8 @@ def bench_torch(quick: bool, reference: Timing) -> list[Row]:
         numpy_rate = n / twin_step_timing("SoftSphere-v0", n, calls, autoreset_mode="same_step").median
         rows.append(Row("torch", f"SoftSphere-v0: numpy twin, {n} envs (same-step autoreset)", numpy_rate,
                         "env-steps/s"))
-        cases = [(torch.float64, "host", None), (torch.float32, "host", None), (torch.float32, "device", None)]
+        cases: list[tuple[Any, str, str | None]] = [(torch.float64, "host", None), (torch.float32, "host", None),
+                                                    (torch.float32, "device", None)]
         cases += [] if quick else [(torch.float32, "device", "default")]
         for dtype, draw, mode in cases:
             rate = n / torch_step_timing(n, "cpu", dtype, draw, mode, calls).median

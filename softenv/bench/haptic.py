@@ -48,7 +48,7 @@ def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
     action_sets = (("random actions", rng.uniform(-1, 1, (4096, 4)).astype(np.float32)),
                    ("pressing actions", press_actions(rng, (4096, 4))))
     for env_id in HAPTIC_SCENES:
-        dt = gym.make(env_id).unwrapped.world.config["dynamics"]["dt"]
+        dt = gym.make(env_id).get_wrapper_attr("world").config["dynamics"]["dt"]
         for label, actions in action_sets:
             env = gym.make(env_id)
             t = gym_step_timing(env, list(actions), steps)
@@ -61,8 +61,8 @@ def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
     rows.append(Row("haptic", f"{ENV_ID}: reset", r.median * 1e6, "us", spread_us(r)))
     n = 1024
     calls = 4 if quick else 12
-    for label, actions in (("random actions", None), ("pressing actions", list(press_actions(rng, (8, n, 4))))):
-        t = twin_step_timing(ENV_ID, n, calls, actions)
+    for label, batch_actions in (("random actions", None), ("pressing actions", list(press_actions(rng, (8, n, 4))))):
+        t = twin_step_timing(ENV_ID, n, calls, batch_actions)
         rate = n / t.median
         rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs ({label})", rate, "env-steps/s",
                         f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}", ">= 25,000/s", rate >= 25_000))
@@ -112,7 +112,7 @@ def extreme_rows(quick: bool) -> list[Row]:
                 dev.control_step(action)
                 overlap = max(overlap, -dev.incisor_clearance())
                 depth = max(depth, dev.penetration())
-                finite &= all(math.isfinite(v) for v in dev._kinematics())
+                finite &= all(math.isfinite(v) for v in dev.kinematics())
             energy, incisor = [dev.energy()[0]], 0.0
             for _ in range(50 if dev.n_substeps < 100 else 5):
                 dev.control_step([0.0, 0.0, 0.0, 0.0])

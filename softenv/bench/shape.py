@@ -24,7 +24,7 @@ def bench_decode(quick: bool, reference: Timing) -> list[Row]:
     model = ShapeModel(10).fit(data.shapes, data.mesh)
     b = model.encode(data.shapes[7]).astype(np.float32)
     out = np.empty(model.n_features_, np.float32)
-    phi = model._components32.ravel()
+    phi = model.augmented(np.float32)[1:].ravel()
     ones = np.ones_like(phi)
     number = 5000 if quick else 20000
     decode = measure(lambda: model.decode(b, out=out), number=number)
@@ -44,7 +44,7 @@ def bench_decode(quick: bool, reference: Timing) -> list[Row]:
     fill = measure(lambda: big.fill(1.0), number=1, repeats=5)
     gbps = big.nbytes / fill.median / 1e9
     # the same products into one cache-resident block: the arithmetic alone, with no output traffic
-    aug = model._augmented[np.dtype(np.float32)]
+    aug = model.augmented(np.float32)
     lifted = np.hstack([np.ones((n, 1), np.float32), batch])
     block = np.empty((decode_block_rows(model.n_features_, len(aug), 4), model.n_features_), np.float32)
     starts = range(0, n - len(block) + 1, len(block))

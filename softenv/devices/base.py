@@ -35,10 +35,17 @@ Config = dict[str, dict[str, Any]]
 class DeviceScene(Protocol):
     """What a device may read of the scene (:class:`softenv.envs.scene.Scene` has it)."""
 
-    mesh: SphereMesh
-    tissue: TissueParams
-    shape_model: ShapeModel
-    workspace: Workspace          # the force-feature box the response covers
+    @property
+    def mesh(self) -> SphereMesh: ...
+
+    @property
+    def tissue(self) -> TissueParams: ...
+
+    @property
+    def shape_model(self) -> ShapeModel: ...
+
+    @property
+    def workspace(self) -> Workspace: ...             # the force-feature box the response covers
 
     @property
     def rest_features(self) -> np.ndarray: ...       # zero force at the middle of the contact range
@@ -55,9 +62,14 @@ class Device(Protocol):
     last step. A device that holds what cannot be pickled (a pymunk space) pickles its :meth:`state`
     and rebuilds (``__getstate__`` / ``__setstate__``)."""
 
-    obs_names: tuple[str, ...]
-    info_keys: tuple[str, ...]
-    episode_info_keys: tuple[str, ...]
+    @property
+    def obs_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def info_keys(self) -> tuple[str, ...]: ...
+
+    @property
+    def episode_info_keys(self) -> tuple[str, ...]: ...
 
     def reset(self) -> list[float]:
         """Put the device at rest; returns the previous action an episode starts with (4 floats)."""
@@ -99,9 +111,14 @@ class DeviceBatch(Protocol):
     """``n`` devices stepped together on arrays (the vector env), bit for bit the single device's
     arithmetic where the kind says so (the ideal device and device 0 of the laryngoscope exactly)."""
 
-    obs_names: tuple[str, ...]
-    info_keys: tuple[str, ...]
-    episode_info_keys: tuple[str, ...]
+    @property
+    def obs_names(self) -> tuple[str, ...]: ...
+
+    @property
+    def info_keys(self) -> tuple[str, ...]: ...
+
+    @property
+    def episode_info_keys(self) -> tuple[str, ...]: ...
 
     def reset(self, mask: np.ndarray) -> np.ndarray:
         """Put the masked devices at rest; returns the previous action their episodes start with

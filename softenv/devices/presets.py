@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .._ops import ArrayOps, ScalarOps
+from .._ops import ArrayOps, PhysicsOps, ScalarOps
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ def render_force(force: np.ndarray, coupling_stiffness: float, preset: HapticPre
 
 
 def render_components(fx: Any, fy: Any, fz: Any, coupling_stiffness: float, preset: HapticPreset,
-                      ops: Any = ScalarOps) -> tuple[Any, Any, Any]:
+                      ops: PhysicsOps = ScalarOps) -> tuple[Any, Any, Any]:
     """:func:`render_force` on components: Python floats (``ScalarOps``) or arrays (``ArrayOps``)."""
     scale = min(1.0, preset.max_stiffness / coupling_stiffness)
     fx, fy, fz = fx * scale, fy * scale, fz * scale

@@ -43,15 +43,18 @@ class Field:
     doc: str
 
 
-def _real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False):
+Check = Callable[[Any, str], Any]
+
+
+def _real(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> Check:
     return lambda v, name: check_real(v, name, lo, hi, low_open=lo_open, high_open=hi_open)
 
 
-def _int(lo: int | None = None, hi: int | None = None):
+def _int(lo: int | None = None, hi: int | None = None) -> Check:
     return lambda v, name: check_int(v, name, lo, hi)
 
 
-def _choice(*options: Any):
+def _choice(*options: Any) -> Check:
     return lambda v, name: check_choice(v, name, options)
 
 
@@ -70,7 +73,7 @@ def _bool(v: Any, name: str) -> bool:
     return v
 
 
-def _pair(lo: float, hi: float):
+def _pair(lo: float, hi: float) -> Check:
     def check(v: Any, name: str) -> tuple[float, float]:
         if not isinstance(v, (tuple, list)) or len(v) != 2:
             raise ValueError(f"{name} must be a (low, high) pair, got {v!r}")

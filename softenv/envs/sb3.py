@@ -12,11 +12,10 @@ episode statistics. Importing this module imports stable-baselines3 (and torch).
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, Iterable, Literal, Sequence
+from typing import Any, Callable, Literal, Sequence
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.envs.registration import load_env_creator
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from .vector import SoftSphereVectorEnv
@@ -44,11 +43,10 @@ class SoftSphereSB3VecEnv(VecEnv):
         entry = spec.vector_entry_point
         if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
             raise ValueError(f"env_id={env_id!r} is not a SoftSphere id")
-        vector_env = load_env_creator(entry)
         # the id's episode length, unless the caller sets task.horizon
         steps = None if "horizon" in kwargs.get("task", {}) else spec.max_episode_steps
-        self.venv: SoftSphereVectorEnv = vector_env(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
-                                                    **{**spec.kwargs, **kwargs})
+        self.venv = SoftSphereVectorEnv(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
+                                        **{**spec.kwargs, **kwargs})
         self.env_id = env_id
         self.info_keys: tuple[str, ...] | None = None if info_keys == "all" else tuple(info_keys)
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
@@ -103,7 +101,7 @@ class SoftSphereSB3VecEnv(VecEnv):
         frames = self.venv.render()
         return list(frames) if frames is not None else [None] * self.num_envs
 
-    def _indices(self, indices: VecEnvIndices) -> Iterable[int]:
+    def _indices(self, indices: VecEnvIndices) -> Sequence[int]:
         if indices is None:
             return range(self.num_envs)
         return [indices] if isinstance(indices, int) else list(indices)

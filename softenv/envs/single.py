@@ -14,7 +14,7 @@ from .batching import check_action_one, target_option
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .task import reward_terms
-from .world import World
+from .world import Episodes, World
 
 _add_reduce = np.add.reduce
 
@@ -167,7 +167,7 @@ class SoftSphereEnv(gym.Env):
             # goal-conditioned tools (SB3's HER and env checker) take any env that has one for a goal env
             self.compute_reward = self.world.compute_reward
         self._renderer: SceneRenderer | None = None
-        self._episode = None
+        self._episode: Episodes | None = None
 
     # -- gymnasium API --------------------------------------------------------------------------
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .._ops import ArrayOps
+from .._ops import ArrayOps, Ops
 
 
 class Dynamics:
@@ -37,7 +37,7 @@ class Dynamics:
     def stateful(self) -> bool:
         return self.kind == "viscoelastic"
 
-    def step(self, z: np.ndarray, g: np.ndarray) -> np.ndarray:
+    def step(self, z: Any, g: Any) -> Any:
         """Advance the creep state ``z`` (a numpy array or torch tensor) in place toward ``g``; return the
         new shape ``b``."""
         if self.kind == "quasi_static":
@@ -92,7 +92,7 @@ def procedure_schedule(targets: np.ndarray, start_insertion: float, horizon: int
     return procedure_features(targets[:, None, :], t, start_insertion, ArrayOps)
 
 
-def procedure_features(target: Any, t: Any, start_insertion: float, ops: Any) -> Any:
+def procedure_features(target: Any, t: Any, start_insertion: float, ops: Ops) -> Any:
     """The procedure's target features at episode fraction ``t = (step + 1) / horizon``: targets
     ``(..., 4)``, fractions ``(...)`` (numpy arrays with :class:`~softenv._ops.ArrayOps`, tensors with
     the torch twin's ops: the same operations, so the same values)."""
@@ -102,7 +102,7 @@ def procedure_features(target: Any, t: Any, start_insertion: float, ops: Any) ->
 
 
 def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,
-                 weights: dict[str, float], ops: Any) -> tuple[Any, Any, Any, Any, Any, Any]:
+                 weights: dict[str, float], ops: Ops) -> tuple[Any, Any, Any, Any, Any, Any]:
     """Reward and its terms from squared b-space distances (scalars or arrays alike).
 
     Returns ``(reward, shape_term, force_term, smooth_term, error_ratio, force)``:

@@ -164,7 +164,9 @@ class DeviceEpisodes:
                 if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
                     raise ValueError(f"seed={s!r} must be an int >= 0 or None")
         if not self.seeded:                    # an env never seeded starts from fresh entropy
-            base = int(np.random.SeedSequence().entropy % (1 << 63))
+            entropy = np.random.SeedSequence().entropy
+            assert isinstance(entropy, int)              # fresh entropy is one int
+            base = entropy % (1 << 63)
             seeds = [base + i if s is None else s for i, s in enumerate(seeds)]
         device = self.seed.device
         fresh = torch.tensor([s is not None for s in seeds], device=device)

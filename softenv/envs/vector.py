@@ -65,7 +65,7 @@ class SoftSphereVectorEnv(VectorEnv):
         self._peak = np.zeros(n)
         self._last_target = np.empty((n, k))
         self._autoreset = np.zeros(n, dtype=bool)
-        self._episode = None
+        self._episode: Any = None            # the episodes' arrays (world.Episodes) once reset() ran
         # the step's large temporaries, reused (see TableWork: fresh ones can cost a page fault a page)
         self._response_work = self.world.response_work(n)
         self._diff = np.empty((n, k))
@@ -118,7 +118,7 @@ class SoftSphereVectorEnv(VectorEnv):
             return obs, reward, terminated, truncated, values, None
         final_obs = np.full(self.num_envs, None, dtype=object)
         for i in np.flatnonzero(done):
-            final_obs[i] = obs_row(obs, i)
+            final_obs[i] = obs_row(obs, int(i))
         self._restart(done)
         return self._write_rows(obs, done), reward, terminated, truncated, values, final_obs
 
@@ -192,7 +192,7 @@ class SoftSphereVectorEnv(VectorEnv):
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
         return self.world.compute_reward(achieved_goal, desired_goal, info)
 
-    def render(self) -> tuple[np.ndarray | None, ...] | None:
+    def render(self) -> tuple[Any, ...] | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode")
             return None

@@ -90,7 +90,7 @@ class World:
     def response(self, features: np.ndarray, work: TableWork | None = None) -> np.ndarray:
         """Equilibrium ``b`` of ``(n, 4)`` force features, each row independent of the others (``work``:
         a table's scratch arrays from :meth:`response_work`)."""
-        if work is not None:
+        if work is not None and self._table is not None:
             return self._table.lookup(features, work)
         return self.scene.response.predict_rowwise(features)
 

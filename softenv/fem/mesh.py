@@ -12,6 +12,7 @@ its points in those of ``n`` on the cube, so mesh studies compare like with like
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -95,7 +96,7 @@ def interpolate_nodal(values: np.ndarray, cube_points: np.ndarray, n: int) -> np
     t = (np.asarray(cube_points, dtype=float) + 1.0) * (n / 2.0)
     cell = np.clip(np.floor(t), 0, n - 1).astype(np.int64)
     f = t - cell
-    out = 0.0
+    out: Any = 0.0
     for dx in (0, 1):
         for dy in (0, 1):
             for dz in (0, 1):

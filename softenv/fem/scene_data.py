@@ -131,7 +131,7 @@ class FESceneData:
         names = [f"{p}_{n}" for p in ("train", "test") for n in ("forces", "shapes", "contact_ids")]
         require_arrays(arrays, names + ["curve_loads", "curve_depths", "lateral_compliance"], path)
         mesh = mesh_from_spec(found.mesh)
-        parts = [_dataset(arrays, part, found, mesh, path) for part in ("train", "test")]
+        train, test = (_dataset(arrays, part, found, mesh, path) for part in ("train", "test"))
         loads, depths = arrays["curve_loads"], arrays["curve_depths"]
         if loads.shape != (found.curve_steps,) or depths.shape != loads.shape:
             raise ValueError(f"{str(path)!r}: contact curve of shapes {loads.shape} and {depths.shape}, expected "
@@ -141,7 +141,7 @@ class FESceneData:
         compliance = float(arrays["lateral_compliance"])
         if not compliance > 0:
             raise ValueError(f"{str(path)!r}: lateral_compliance={compliance!r} must be > 0 m/N")
-        return cls(found, *parts, loads, depths, compliance, generation)
+        return cls(found, train, test, loads, depths, compliance, generation)
 
 
 def _dataset(arrays: dict[str, np.ndarray], part: str, request: FERequest, mesh: SphereMesh,

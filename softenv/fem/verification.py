@@ -15,13 +15,13 @@ def uniaxial_closed_form(stretch: float, params: FEParams) -> tuple[float, float
     ``psi = mu/2 (I1_bar - 3) + K/2 (J - 1)^2``, under ``F = diag(l, l, stretch)`` with no lateral stress."""
     mu, K = params.mu, params.bulk
 
-    def cauchy(l: float) -> tuple[float, float]:
-        J = l * l * stretch
-        i1 = 2 * l * l + stretch * stretch
+    def cauchy(lam: float) -> tuple[float, float]:        # lam: the lateral stretch
+        J = lam * lam * stretch
+        i1 = 2 * lam * lam + stretch * stretch
         dev = mu * J ** (-5 / 3)
-        return dev * (l * l - i1 / 3) + K * (J - 1), dev * (stretch * stretch - i1 / 3) + K * (J - 1)
+        return dev * (lam * lam - i1 / 3) + K * (J - 1), dev * (stretch * stretch - i1 / 3) + K * (J - 1)
 
-    lateral = brentq(lambda l: cauchy(l)[0], 0.2, 3.0, xtol=1e-15, rtol=1e-15)
+    lateral = brentq(lambda lam: cauchy(lam)[0], 0.2, 3.0, xtol=1e-15, rtol=1e-15)
     return lateral, cauchy(lateral)[1] * lateral * lateral     # nominal: J sigma / stretch = sigma l^2
 
 

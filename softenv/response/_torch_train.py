@@ -49,11 +49,11 @@ def train_mlp(init: list[np.ndarray], x: np.ndarray, y: np.ndarray,
 
     step = {"lm": _lm_epochs, "lbfgs": _lbfgs_epochs, "adam": _adam_epochs}[cfg.trainer]
     best, best_score, fails, epochs = theta.clone(), score(theta), 0, 0
-    for theta in step(theta, shapes, X, Y, cfg):
+    for current in step(theta, shapes, X, Y, cfg):
         epochs += 1
-        s = score(theta)
+        s = score(current)
         if s < best_score:
-            best, best_score, fails = theta.clone(), s, 0
+            best, best_score, fails = current.clone(), s, 0
         else:
             fails += 1
             if validation is not None and fails >= cfg.max_fail:

@@ -79,6 +79,9 @@ class AnfisResponse(ResponseModel):
     """
 
     kind = "anfis"
+    rule_mf_: np.ndarray          # (R, d) each rule's membership function per input
+    premise_: np.ndarray          # (d, m, P) membership parameters
+    consequent_: np.ndarray       # (K, R, d + 1, q) linear consequents
 
     def __init__(self, n_mfs: int = 2, mf: str = "gbell", rules: str = "grid", cluster_radius: float = 0.5,
                  epochs: int = 10, step_size: float = 0.01, ridge: float = 1e-6, multi_output: bool = False,
@@ -122,7 +125,8 @@ class AnfisResponse(ResponseModel):
 
     # -- forward pass -----------------------------------------------------------------------------
 
-    def _log_memberships(self, x: np.ndarray, premise: np.ndarray, with_grad: bool = False):
+    def _log_memberships(self, x: np.ndarray, premise: np.ndarray, with_grad: bool = False
+                         ) -> tuple[np.ndarray, Any]:
         """``log mu`` ``(K, N, d, m)`` and, if asked, ``d log mu / d premise`` ``(K, N, d, m, P)``."""
         xe = x[None, :, :, None]
         if self.mf == "gaussian":
@@ -234,6 +238,7 @@ class AnfisResponse(ResponseModel):
             self._enforce_limits(premise)
             errors.append(err)
             step = self._adapt_step(step, errors)
+        assert best_consequent is not None                                       # every run has an epoch
         self.premise_, self.consequent_ = best_premise, best_consequent
         self.history_ = np.array(history)                                          # (epochs, 2, K)
 

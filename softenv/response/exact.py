@@ -112,7 +112,8 @@ class TabulatedResponse(ResponseModel):
     # 4,096 points' 15 MB did not: the twin at 16,384 envs ran 1.2x slower with those
     CHUNK = 1024
 
-    def __init__(self, low: Sequence[float], high: Sequence[float], values: np.ndarray, *, clip: bool = False) -> None:
+    def __init__(self, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray, values: np.ndarray, *,
+                 clip: bool = False) -> None:
         super().__init__(clip=clip)
         self.low_ = np.asarray(low, dtype=np.float64)
         self.high_ = np.asarray(high, dtype=np.float64)
@@ -224,7 +225,7 @@ class TabulatedResponse(ResponseModel):
             frac = t - cell
             base += cell * stride
             pairs.append((1.0 - frac, frac))
-        weights = pairs[0]
+        weights: list[float] = list(pairs[0])
         for pair in pairs[1:]:
             weights = [w * p for w in weights for p in pair]
         rows = self._flat[base:].take(self._offsets, axis=0)      # the corners' rows, from the base corner's

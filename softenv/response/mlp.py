@@ -107,7 +107,7 @@ class MLPResponse(ResponseModel):
             validation = (x[perm[:n_val]], y[perm[:n_val]])
             x, y = x[perm[n_val:]], y[perm[n_val:]]
         sizes = [x.shape[1], *self.hidden, y.shape[1]]
-        best_score, best_params, self.restart_scores_ = np.inf, None, []
+        best_score, best_params, self.restart_scores_ = np.inf, [], []
         for _ in range(self.restarts):
             params, score, epochs = train_mlp(nguyen_widrow(sizes, rng), x, y, validation, self)
             self.restart_scores_.append(score)

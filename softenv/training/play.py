@@ -160,7 +160,7 @@ def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, ste
     world = env.world
     screen.fill((250, 248, 244))
     radius = world.config["tissue"]["radius"]
-    vertices = world.vertices(env._b).reshape(-1, 3)             # in tongue radii
+    vertices = world.vertices(env.b).reshape(-1, 3)             # in tongue radii
     profile = clinical.sagittal_profile(vertices, world.scene.mesh.triangles) * radius
     order = np.argsort(np.arctan2(profile[:, 1], profile[:, 0]))
     pygame.draw.polygon(screen, (232, 144, 154), [px(*p) for p in profile[order]])

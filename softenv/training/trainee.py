@@ -59,7 +59,8 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
                               ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
         check_real(value, name, 0.0, high)
     log = np.array(log, dtype=np.float64)
-    t, pose = log[:, 0], log[:, 1:].copy()
+    t: np.ndarray = log[:, 0]
+    pose = log[:, 1:].copy()
     duration = t[-1]
     ramp = lambda a, b: 0.5 - 0.5 * np.cos(np.pi * np.clip((t / duration - a) / (b - a), 0.0, 1.0))  # noqa: E731
     # lift: the expert's hand goes down (z) between leaving the start and 40 % of the procedure
@@ -78,8 +79,7 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
         moving = np.flatnonzero(np.any(np.abs(np.diff(log[:, 1:], axis=0)) > 1e-4, axis=1))   # faster than 5 mm/s
         t, pose = _pause(t, pose, hesitation, (moving[0], moving[-1] + 1) if moving.size else (0, len(t) - 1))
     limits = np.array(list(hand_limits(haptic_config(scene)).values()))      # (4, 2): the workspace per column
-    low, high = limits[:, 0], limits[:, 1]
-    return np.column_stack([t, speed_limited(np.clip(pose, low, high), float(t[1] - t[0]), scene)])
+    return np.column_stack([t, speed_limited(np.clip(pose, limits[:, 0], limits[:, 1]), float(t[1] - t[0]), scene)])
 
 
 def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -108,7 +108,7 @@ def skill_population(expert_log: np.ndarray, levels: int = 5, per_level: int = 2
     rng = np.random.default_rng(seed)
     out = []
     for level in range(levels):
-        for i in range(per_level):
+        for _ in range(per_level):
             share = level / max(levels - 1, 1)
             amounts = {name: float(share * worst * rng.uniform(0.5, 1.5)) for name, worst in WORST.items()}
             out.append((level, amounts, degrade(expert_log, scene, seed=int(rng.integers(1 << 31)), **amounts)))

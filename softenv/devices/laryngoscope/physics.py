@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from ..._ops import ScalarOps
+from ..._ops import PhysicsOps, ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
 
@@ -80,7 +80,7 @@ def substep_constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -
 
 
 
-def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: Any) -> tuple[Any, Any, Any]:
+def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: PhysicsOps) -> tuple[Any, Any, Any]:
     """The point of the blade's underside (heel to tip) nearest the tongue's centre, and its distance."""
     hx, hy = c.heel
     tx, ty = c.tip
@@ -95,7 +95,7 @@ def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: A
 
 
 def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: Constants,
-                    ops: Any) -> tuple[Any, ...]:
+                    ops: PhysicsOps) -> tuple[Any, ...]:
     """One substep of the tongue's contact: the arithmetic both devices share (the single device runs
     it inlined into its compiled substep loop).
 
@@ -189,7 +189,7 @@ def near_walls(pose: tuple[float, ...], velocity: tuple[float, ...], low: tuple[
             for x, v, lo, hi in zip(pose, velocity, low, high)]
 
 
-def hand_command(action: Any, pitch: Any, p: LaryngoscopeParams, ops: Any) -> tuple[Any, Any, Any, Any]:
+def hand_command(action: Any, pitch: Any, p: LaryngoscopeParams, ops: PhysicsOps) -> tuple[Any, Any, Any, Any]:
     """World velocities ``(vX, vY, spin, v_lateral)`` of the hand for normalised actions, in the hand's
     frame at the start of the control period: insert along the blade toward its tip, press along the
     blade's normal into the tongue, sweep toward +y, pitch counter-clockwise (tip down)."""
@@ -209,7 +209,7 @@ def hand_action(vX: float, vY: float, spin: float, v_lateral: float, pitch: floa
             spin / p.max_pitch_rate)
 
 
-def contact_features(cx: Any, cy: Any, anchor: Any, P: Any, Q: Any, R: float, ops: Any) -> tuple[Any, Any, Any, Any]:
+def contact_features(cx: Any, cy: Any, anchor: Any, P: Any, Q: Any, R: float, ops: PhysicsOps) -> tuple[Any, Any, Any, Any]:
     """Force features of the contact: insertion and lateral arc (m), normal and sideways force (N)."""
     return R * ops.atan2(cy, cx), R * ops.asin(ops.clip(anchor / R, -1.0, 1.0)), P, Q
 

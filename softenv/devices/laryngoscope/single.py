@@ -24,6 +24,9 @@ class Laryngoscope(LaryngoscopeBase):
 
     ops = ScalarOps
     _own = staticmethod(float)
+    _impulse: float                              # the incisors' impulse summed over this period's substeps
+    _lateral: tuple[float, float, float, float]  # blade y, blade vy, hand y, anchor
+    _hand_pose: tuple[float, float, float]       # grip x, y, pitch
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact) -> None:
         super().__init__(params, contact, 1)
@@ -155,11 +158,11 @@ class Laryngoscope(LaryngoscopeBase):
         try:
             touching = blade.shapes_collide(incisor).points
         except AssertionError:                 # pymunk 7 asserts instead of returning no points
-            touching = []
+            touching = ()
         if touching:
             return min(point.distance for point in touching)
         a, b = np.array(incisor.a), np.array(incisor.b)
-        corners = [np.array(blade.body.local_to_world(v)) for v in blade.get_vertices()]
+        corners = [np.array(self._blade.local_to_world(v)) for v in blade.get_vertices()]
         ends = min(blade.point_query(tuple(a)).distance, blade.point_query(tuple(b)).distance)
         t = [float(np.clip(np.dot(v - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)) for v in corners]
         sides = min(float(np.linalg.norm(v - (a + u * (b - a)))) for v, u in zip(corners, t))
@@ -167,7 +170,7 @@ class Laryngoscope(LaryngoscopeBase):
 
     def penetration(self) -> float:
         """How deep (m) the blade's underside reaches into the undeformed tongue (negative: clear of it)."""
-        x, y, a = self._kinematics()[:3]
+        x, y, a = self.kinematics()[:3]
         return self.c.R - nearest_point(x, y, math.cos(a), math.sin(a), self.c, ScalarOps)[2]
 
     @property

@@ -29,7 +29,7 @@ try:
 except ImportError as exc:  # pragma: no cover - the device extra is part of every test install
     raise ImportError("the simulated laryngoscope needs pymunk >= 7: pip install 'softenv[device]'") from exc
 
-from ..._ops import ArrayOps
+from ..._ops import ArrayOps, PhysicsOps
 from ..contact import TongueContact
 from ..presets import render_components
 from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, SPEED_SCALE, SPIN_SCALE
@@ -68,7 +68,7 @@ class DeviceSpace:
         self.offsets = np.array([[GRID_SPACING * (i % side), GRID_SPACING * (i // side)] for i in range(n)])
         self.hands: list[pymunk.Body] = []
         self.blades: list[pymunk.Body] = []
-        self.incisors: list[pymunk.Circle] = []
+        self.incisors: list[pymunk.Segment] = []
         for ox, oy in self.offsets.tolist():
             hand = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             blade = pymunk.Body(p.mass, p.moment)
@@ -132,8 +132,11 @@ class LaryngoscopeBase:
     """What the single and batched devices share: parameters, contact law, space, constants, and the
     readings of their state (written once against ``ops``: floats for one device, arrays for a batch)."""
 
-    ops: Any                                  # ScalarOps (one device) or ArrayOps (a batch)
+    ops: PhysicsOps                     # ScalarOps (one device) or ArrayOps (a batch)
     _own: Any                                 # a copy of a reading the caller may keep (float or np.copy)
+    # the state both keep in their own form: floats and tuples (one device) or arrays (a batch)
+    _incisor: Any                             # the incisors' mean force over the last period (N)
+    _hand_v: Any                              # the hand's last velocities: x, z, pitch rate, lateral
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         self.params = params
@@ -150,7 +153,7 @@ class LaryngoscopeBase:
         self._kin: Any = None
         self._pull: Any = None
 
-    def _kinematics(self) -> Any:
+    def kinematics(self) -> Any:
         """Blade x, y, angle, vx, vy, spin and hand x, y, pitch (local frame), read once per state."""
         if self._kin is None:
             self._kin = self._read_kinematics()
@@ -160,7 +163,7 @@ class LaryngoscopeBase:
         """``(cos, sin)`` of the blade's angle and the coupling's force ``(Fx, Fy)`` on it now (the
         clinical record and the haptic force both need them; computed once per state)."""
         if self._pull is None:
-            x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
+            x, y, a, vx, vy, w, gx, gy, pitch = self.kinematics()
             hvx, hvy, hw, _ = self._hand_v_state()
             ca, sa = self.ops.cos(a), self.ops.sin(a)
             Fx, Fy, _ = coupling_force((x, y, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), self.c)
@@ -200,7 +203,7 @@ class LaryngoscopeBase:
         coupling's pull on the blade, split into the wrist's (rotary spring and damper: levering)
         and that of the force at the grip (lifting)."""
         c = self.c
-        x, y, a, vx, vy, w, gx, gy, pitch = self._kinematics()
+        x, y, a, vx, vy, w, gx, gy, pitch = self.kinematics()
         hand_lat = self._lateral_state()[2]
         hw = self._hand_v_state()[2]
         ca, sa, Fx, Fy = self._coupling_pull()
@@ -219,7 +222,7 @@ class LaryngoscopeBase:
 
     def blade_pose(self) -> np.ndarray:
         """``(n, 4)``: x, z (m), pitch (rad) of the blade's centre of mass and its lateral y (m)."""
-        x, y, a = self._kinematics()[:3]
+        x, y, a = self.kinematics()[:3]
         return np.stack([np.asarray(v, dtype=np.float64).reshape(-1) for v in (x, y, a, self._lateral_state()[0])],
                         axis=-1)
 
@@ -256,7 +259,7 @@ class LaryngoscopeBase:
         relative to the start, over their scales (module constants of :mod:`softenv.devices.laryngoscope`)."""
         p = self.params
         (bx, by), (gx, gy) = p.body_start, p.grip_start
-        px, py, a, vx, vy, w, hx, hy, pitch = self._kinematics()
+        px, py, a, vx, vy, w, hx, hy, pitch = self.kinematics()
         lat_y, lat_v, hand_lat, _ = self._lateral_state()
         P, Q = self._contact_state()[:2]
         return ((px - bx) / POSITION_SCALE, (py - by) / POSITION_SCALE, a / ANGLE_SCALE, lat_y / LATERAL_SCALE,
