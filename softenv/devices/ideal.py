@@ -35,7 +35,7 @@ class ForceBox:
         return self.mid + action * self.half
 
     def features_one(self, action: list[float]) -> list[float]:
-        """Float twin of :meth:`features` for one action given as Python floats."""
+        """:meth:`features` of one action given as Python floats (the same bits)."""
         return [m + a * h for m, a, h in zip(self._mid, action, self._half)]
 
     def normalised(self, features: np.ndarray) -> np.ndarray:
@@ -43,7 +43,7 @@ class ForceBox:
         return (features - self.mid) / self.half
 
     def normalised_one(self, features: list[float]) -> list[float]:
-        """Float twin of :meth:`normalised`."""
+        """:meth:`normalised` of one row of Python floats (the same bits)."""
         return [(f - m) / h for f, m, h in zip(features, self._mid, self._half)]
 
 

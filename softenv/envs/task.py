@@ -1,7 +1,7 @@
 """The task an environment poses besides its device (``softenv.devices``): targets, dynamics, reward.
 
 Each part works on arrays with any leading batch shape, so the single environment (state of shape
-``(k,)``) and its batched twin (``(N, k)``) call the same code. Scalar twins exist only where the
+``(k,)``) and its batched twin (``(N, k)``) call the same code. Float versions exist only where the
 single environment would otherwise pay numpy's per-call overhead on four numbers; they perform the
 same IEEE operations in the same order, so both environments agree bit for bit.
 """

@@ -99,7 +99,7 @@ class World:
         return None if self._table is None else self._table.workspace(n)
 
     def response_one(self, features: list[float]) -> np.ndarray:
-        """Scalar twin of :meth:`response` for one force given as Python floats (bitwise equal)."""
+        """:meth:`response` of one force given as Python floats (bitwise equal to its row of a batch)."""
         if self._table is not None:
             return self._table.lookup_one(features)
         return self.scene.response.predict_rowwise(np.array([features]))[0]

@@ -210,7 +210,7 @@ class TabulatedResponse(ResponseModel):
         np.matmul(weights[:, None, :], rows, out=out[:, None, :])
 
     def lookup_one(self, x: Sequence[float]) -> np.ndarray:
-        """Interpolate at one point given as Python floats: the scalar twin of :meth:`lookup`.
+        """Interpolate at one point given as Python floats: :meth:`lookup` of one row, bit for bit.
 
         The corner weights are the same left-to-right products in the same corner order, so the
         result equals ``lookup`` bit for bit, without numpy's per-call cost on tiny arrays.
