@@ -85,7 +85,7 @@ def sweep_case(env_id: str, sections: dict[str, Any]) -> dict[str, Any]:
         a = rng.choice([-1.0, 1.0], 4) if step % 2 else rng.uniform(-1, 1, 4)
         obs, reward, terminated, truncated, info = env.step(a)
         finite &= bool(np.isfinite(obs).all() and np.isfinite(reward))
-        error, ok = surface_checks(env, env.unwrapped._b)
+        error, ok = surface_checks(env, env.unwrapped.b)
         worst, valid = max(worst, error), valid and ok
         if terminated or truncated:
             env.reset()

@@ -193,7 +193,7 @@ def test_eval_callback_scores_the_test_targets_when_asked_to():
                 seed=0, device="cpu")
     model.learn(128, callback=EvalCallback(eval_env, n_eval_episodes=2, eval_freq=64, verbose=0))
     test_cells = {tuple(c) for c in world.family.cells}
-    features = eval_env.envs[0].unwrapped._target_features
+    features = eval_env.envs[0].unwrapped.target_features
     assert world.family.split == "test"
     assert all(tuple(c) in test_cells for c in world.family.cell_of(features[:1]))
 

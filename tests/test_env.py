@@ -160,13 +160,13 @@ def test_shape_error_and_reward_agree_with_rebuilt_vertices():
     env = gym.make("SoftSphere-v0", obs_mode="vertices")
     world: World = env.unwrapped.world
     obs, _ = env.reset(seed=4)
-    target_b = env.unwrapped._target_b[0]
+    target_b = env.unwrapped.target_b[0]
     sm = world.scene.shape_model
     n = world.n_vertices
     for a in np.random.default_rng(0).uniform(-1, 1, (5, 4)).astype(np.float32):
         obs, reward, _, _, info = env.step(a)
         points = obs[2 * world.k + 8:].reshape(n, 3).astype(np.float64) * world.scene.tissue.radius
-        truth = sm.decode(env.unwrapped._b).reshape(n, 3)
+        truth = sm.decode(env.unwrapped.b).reshape(n, 3)
         np.testing.assert_allclose(points, truth, atol=1e-8)            # float32 vertices over R
         target = sm.decode(target_b).reshape(n, 3)
         rest = sm.decode(world.b_rest).reshape(n, 3)
@@ -200,14 +200,14 @@ def test_viscoelastic_creep_matches_the_closed_form_and_is_stable(tau, dt):
         env.step(a)
         decay = 1.0 if tau == 0.0 else math.exp(-n * dt / tau)
         expected = 0.7 * g + 0.3 * (g + (b0 - g) * (0.0 if tau == 0.0 else decay))
-        np.testing.assert_allclose(u._b, expected, rtol=1e-9, atol=1e-12)
-        assert np.isfinite(u._b).all()
+        np.testing.assert_allclose(u.b, expected, rtol=1e-9, atol=1e-12)
+        assert np.isfinite(u.b).all()
 
 
 def test_procedure_target_moves_insert_press_sweep():
     env = gym.make("SoftSphereProcedure-v0")
     env.reset(seed=1)
-    f = env.unwrapped._target_features
+    f = env.unwrapped.target_features
     third = len(f) // 3
     assert f[0, 2] < 0.2 * f[-1, 2] and f[0, 3] == pytest.approx(0.0, abs=0.1)       # light touch, no sweep
     assert np.all(np.diff(f[:third, 0]) * np.sign(f[-1, 0] - f[0, 0]) >= 0)         # insertion moves in

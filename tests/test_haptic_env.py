@@ -76,7 +76,7 @@ def test_no_motion_scores_zero_and_leaves_the_tongue_at_rest():
     u = env.unwrapped
     for _ in range(20):
         _, _, _, _, info = env.step(np.zeros(4, np.float32))
-    assert np.array_equal(u._b, u.world.b_rest) and info["tongue_force_N"] == 0.0
+    assert np.array_equal(u.b, u.world.b_rest) and info["tongue_force_N"] == 0.0
     assert info["normalized_score"] == pytest.approx(0.0, abs=1e-9)
 
 

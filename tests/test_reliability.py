@@ -56,10 +56,10 @@ BAD_ACTIONS = {
 def test_single_and_batched_envs_refuse_the_same_action_types_with_a_value_error(bad):
     env = _single()
     env.reset(seed=0)
-    before = env.unwrapped._b.copy()
+    before = env.unwrapped.b.copy()
     with pytest.raises(ValueError, match="action must be a real numeric array"):
         env.step(bad)
-    np.testing.assert_array_equal(env.unwrapped._b, before)
+    np.testing.assert_array_equal(env.unwrapped.b, before)
     venv = _batched()
     venv.reset(seed=0)
     batch = np.array([bad] * 3, dtype=object) if not isinstance(bad, (dict, str)) else bad
