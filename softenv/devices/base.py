@@ -53,14 +53,10 @@ class DeviceScene(Protocol):
     def contact_curve(self, design_force: float) -> ContactCurve: ...
 
 
-@runtime_checkable
-class Device(Protocol):
-    """One device, stepped on Python floats (the single env; a step's budget is microseconds).
-
-    ``obs_names`` names its observation slice (values in [-1, 1]); ``info_keys`` are what :meth:`report`
-    adds to ``info`` every step, ``episode_info_keys`` what :meth:`episode_info` adds at an episode's
-    last step. A device that holds what cannot be pickled (a pymunk space) pickles its :meth:`state`
-    and rebuilds (``__getstate__`` / ``__setstate__``)."""
+class DeviceNames(Protocol):
+    """What both forms of a device name: ``obs_names`` its observation slice (values in [-1, 1]),
+    ``info_keys`` what ``report`` adds to ``info`` every step, ``episode_info_keys`` what
+    ``episode_info`` adds at an episode's last step."""
 
     @property
     def obs_names(self) -> tuple[str, ...]: ...
@@ -70,6 +66,14 @@ class Device(Protocol):
 
     @property
     def episode_info_keys(self) -> tuple[str, ...]: ...
+
+
+@runtime_checkable
+class Device(DeviceNames, Protocol):
+    """One device, stepped on Python floats (the single env; a step's budget is microseconds). A device
+    that holds what cannot be pickled (a pymunk space) pickles its :meth:`state` and rebuilds
+    (``__getstate__`` / ``__setstate__``)."""
+
 
     def reset(self) -> list[float]:
         """Put the device at rest; returns the previous action an episode starts with (4 floats)."""
@@ -107,18 +111,10 @@ class Device(Protocol):
 
 
 @runtime_checkable
-class DeviceBatch(Protocol):
+class DeviceBatch(DeviceNames, Protocol):
     """``n`` devices stepped together on arrays (the vector env), bit for bit the single device's
     arithmetic where the kind says so (the ideal device and device 0 of the laryngoscope exactly)."""
 
-    @property
-    def obs_names(self) -> tuple[str, ...]: ...
-
-    @property
-    def info_keys(self) -> tuple[str, ...]: ...
-
-    @property
-    def episode_info_keys(self) -> tuple[str, ...]: ...
 
     def reset(self, mask: np.ndarray) -> np.ndarray:
         """Put the masked devices at rest; returns the previous action their episodes start with
