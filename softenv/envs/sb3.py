@@ -68,7 +68,7 @@ class SoftSphereSB3VecEnv(VecEnv):
         obs, rewards, terminated, truncated, values, final_obs = self.venv.step_values(self._actions)
         dones = terminated | truncated
         if self.info_keys is not None:
-            sometimes = self.venv.episode_end_info_keys          # absent on steps where no episode ends
+            sometimes = self.venv.device.episode_info_keys       # absent on steps where no episode ends
             missing = [key for key in self.info_keys if key not in values and key not in sometimes]
             if missing:
                 raise ValueError(f"info_keys {missing} are not info keys of {self.env_id}; available: "

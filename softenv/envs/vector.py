@@ -71,8 +71,6 @@ class SoftSphereVectorEnv(VectorEnv):
         self._diff = np.empty((n, k))
         self._renderers: list[SceneRenderer] = []
         self.device = self.world.device_kind.batch(self.world.scene, self.world.config, n)
-        # info keys present only on steps where an episode ends
-        self.episode_end_info_keys = tuple(self.device.episode_info_keys)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
@@ -170,10 +168,10 @@ class SoftSphereVectorEnv(VectorEnv):
         extra = device.report(info_values, s)
         reward = reward + extra
         done = terminated | truncated
-        if self.episode_end_info_keys and done.any():        # the device's episode record where one ends
+        if device.episode_info_keys and done.any():          # the device's episode record where one ends
             ended = np.flatnonzero(done)
             records = {int(i): device.episode_info(int(i), self._b[i]) for i in ended}
-            for key in self.episode_end_info_keys:
+            for key in device.episode_info_keys:
                 column = np.full(self.num_envs, None, dtype=object)
                 for i, record in records.items():
                     column[i] = record[key]
