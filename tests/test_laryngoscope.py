@@ -302,3 +302,36 @@ def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: d
         touched += single.normal_force > 0
         incisors += single.incisor_force > 0
     assert touched > periods // 4 and incisors >= on_incisors
+
+
+@pytest.mark.parametrize("sections", [{}, {"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0},
+                                           "tissue": {"E": 1e7}}], ids=["default", "stiff"])
+def test_the_float_kernel_equals_the_ops_kernel_bit_for_bit(sections: dict) -> None:
+    """``tongue_substep_floats`` (what the single device runs) against ``tongue_substep`` with
+    ``ScalarOps`` (its source) on 20,000 random states: blades clear of the tongue, touching it and pressed
+    deep into its barrier and wall (past the table's last node), levelled and tipped, still and fast,
+    stuck and sliding sideways. Every output is the same float, bit for bit (the sign of zero included)."""
+    import struct
+
+    from softenv._ops import ScalarOps
+    from softenv.devices.laryngoscope.physics import tongue_substep, tongue_substep_floats
+
+    dev = make_device(**sections)
+    c, loads, slopes = dev.c, dev.contact.loads_list, dev.contact.slopes_list
+    bx, by = dev.params.body_start
+    rng = np.random.default_rng(11)
+    touched = deep = slid = 0
+    for _ in range(20_000):
+        a = rng.uniform(-0.6, 0.6)
+        blade = (bx + rng.uniform(-0.04, 0.03), by - rng.uniform(-0.01, 0.9) * c.R, a, math.cos(a), math.sin(a),
+                 *rng.normal(0.0, 0.3, 2), rng.normal(0.0, 3.0))
+        hand = (*(np.array(blade[:2]) + rng.normal(0.0, 0.01, 2) + dev.params.grip), a + rng.normal(0.0, 0.1),
+                *rng.normal(0.0, 0.2, 3))
+        lateral = tuple(rng.normal(0.0, 0.01, 4))
+        args = (blade, hand, lateral, rng.normal(0.0, 0.1), loads, slopes, c)
+        ours, source = tongue_substep_floats(*args), tongue_substep(*args, ScalarOps)
+        assert [struct.pack("<d", float(x)) for x in ours] == [struct.pack("<d", float(x)) for x in source], args
+        touched += source[3] > 0
+        deep += source[3] > 5 * dev.params.max_normal_force
+        slid += source[3] > 0 and abs(source[4]) == c.mu * source[3]
+    assert touched > 5_000 and deep > 100 and slid > 100         # every branch was taken

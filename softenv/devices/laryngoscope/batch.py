@@ -21,6 +21,10 @@ class LaryngoscopeBatch(LaryngoscopeBase):
     ops = ArrayOps
     _own = staticmethod(np.copy)
 
+    @staticmethod
+    def _rows(*columns: np.ndarray) -> np.ndarray:
+        return np.stack(columns, axis=-1)
+
     _READ = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE | pymunk.batch.BodyFields.VELOCITY \
         | pymunk.batch.BodyFields.ANGULAR_VELOCITY
     _WRITE = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY \

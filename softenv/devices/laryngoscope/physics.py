@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from math import sqrt
 from typing import Any
 
 from ..._ops import PhysicsOps, ScalarOps
@@ -96,8 +97,8 @@ def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: P
 
 def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: Constants,
                     ops: PhysicsOps) -> tuple[Any, ...]:
-    """One substep of the tongue's contact: the arithmetic both devices share (the single device runs
-    it inlined into its compiled substep loop).
+    """One substep of the tongue's contact: the arithmetic both devices share (the batch runs it on
+    arrays; the single device runs :func:`tongue_substep_floats`, this function written out for floats).
 
     ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
     ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
@@ -160,6 +161,73 @@ def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: An
     limit = c.mu * P
     Q = ops.clip(stuck, -limit, limit)                         # Coulomb: past mu P the anchor slides
     anchor = ops.where(touching, ops.where(Q != stuck, lat_y - Q / c.k_t, anchor), lat_y)
+    return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
+
+
+def tongue_substep_floats(blade: tuple, hand: tuple, lateral: tuple, hl: float, loads: list[float],
+                          slopes: list[float], c: Constants) -> tuple[float, ...]:
+    """:func:`tongue_substep` on Python floats with ``ScalarOps``, written out: the same operations in the
+    same order, with the ops and the helpers (:func:`nearest_point`, :func:`coupling_force`) inlined.
+    The single device runs it every substep (a third of the step's time went to those calls);
+    ``tests/test_laryngoscope.py`` holds it to :func:`tongue_substep` bit for bit."""
+    px, py, a, cos_a, sin_a, vx, vy, w = blade
+    lat_y, lat_v, hand_lat, anchor = lateral
+    hx, hy = c.heel
+    tx, ty = c.tip
+    ex = px + cos_a * hx - sin_a * hy
+    ey = py + sin_a * hx + cos_a * hy
+    dx = (px + cos_a * tx - sin_a * ty) - ex
+    dy = (py + sin_a * tx + cos_a * ty) - ey
+    t = -(ex * dx + ey * dy) / (dx * dx + dy * dy)
+    t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+    cx = ex + t * dx
+    cy = ey + t * dy
+    dist = sqrt(cx * cx + cy * cy) + 1e-300
+    touching = dist < c.R
+    if not touching:                            # off the tongue P is 0
+        fx = fy = torque = P = 0.0
+    else:
+        depth = c.R - dist
+        nx = cx / dist
+        ny = cy / dist
+        rx = cx - px
+        ry = cy - py
+        approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)
+        rn = rx * ny - ry * nx
+        inv_meff = c.inv_m + rn * rn * c.inv_I
+        top = c.top
+        x = (depth if depth > 0.0 else 0.0) * c.inv_step
+        i = int(x) if x < top else top
+        slope = slopes[i]
+        law = loads[i] + (depth - i * c.step) * slope
+        x = depth + c.h * approach
+        x = (x if x > 0.0 else 0.0) * c.inv_step
+        ahead = slopes[int(x) if x < top else top]
+        slope = ahead if ahead > slope else slope
+        excess = slope - c.k_ref
+        excess = excess if excess > 0.0 else 0.0
+        stiff = excess * c.h + 2.0 * sqrt(excess / inv_meff)
+        gx, gy, pitch, hvx, hvy, hw = hand
+        (qa, qb) = c.grip
+        qx, qy = cos_a * qa - sin_a * qb, sin_a * qa + cos_a * qb
+        Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
+        Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
+        tau = qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
+        push = -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
+        beta = stiff * c.h * inv_meff
+        P = (law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)
+        P = P if P > 0.0 else 0.0
+        fx = P * nx
+        fy = P * ny
+        torque = rx * fy - ry * fx
+    k_s = c.k_t * touching
+    lat_v = (lat_v + c.h_over_m * (c.k * (hand_lat - lat_y) + c.c * hl - k_s * (lat_y - anchor))) / \
+        (1.0 + c.h_over_m * c.c)
+    lat_y = lat_y + c.h * lat_v
+    stuck = k_s * (lat_y - anchor)
+    limit = c.mu * P
+    Q = -limit if stuck < -limit else (limit if stuck > limit else stuck)
+    anchor = ((lat_y - Q / c.k_t) if Q != stuck else anchor) if touching else lat_y
     return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
 
 

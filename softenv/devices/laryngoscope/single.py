@@ -1,6 +1,7 @@
 """One simulated laryngoscope, stepped with Python floats: the single env's device and the 1 kHz
-haptic loop's (:mod:`softenv.haptics`). The physics is :mod:`.physics`, run with ``ScalarOps``; the
-batch (:mod:`.batch`) runs the same arithmetic on arrays."""
+haptic loop's (:mod:`softenv.haptics`). The physics is :mod:`.physics`: its contact arithmetic
+written out for floats (``tongue_substep_floats``, held bit for bit to the ``ops`` version the batch
+(:mod:`.batch`) runs on arrays)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from pymunk._chipmunk import lib as _lib
 from ..._ops import ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
-from .physics import contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep
+from .physics import contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
 from .space import BLADE_TYPE, INCISOR_TYPE, DeviceState, LaryngoscopeBase
 
 
@@ -24,6 +25,10 @@ class Laryngoscope(LaryngoscopeBase):
 
     ops = ScalarOps
     _own = staticmethod(float)
+
+    @staticmethod
+    def _rows(*columns: float) -> np.ndarray:
+        return np.array([columns])
     _impulse: float                              # the incisors' impulse summed over this period's substeps
     _lateral: tuple[float, float, float, float]  # blade y, blade vy, hand y, anchor
     _hand_pose: tuple[float, float, float]       # grip x, y, pitch
@@ -119,9 +124,9 @@ class Laryngoscope(LaryngoscopeBase):
                     hl = low if x < low else (high if x > high else x)
                 hand_lat = hand_lat + h * hl
                 ca, sa = cos(a), sin(a)
-                fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
+                fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep_floats(
                     (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-                    loads, slopes, c, ScalarOps)
+                    loads, slopes, c)
                 if P != 0.0:                                # off the tongue Chipmunk's reset force of 0 stands
                     set_force(blade, (fx, fy))
                     set_torque(blade, torque)

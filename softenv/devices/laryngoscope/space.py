@@ -134,6 +134,7 @@ class LaryngoscopeBase:
 
     ops: PhysicsOps                     # ScalarOps (one device) or ArrayOps (a batch)
     _own: Any                                 # a copy of a reading the caller may keep (float or np.copy)
+    _rows: Any                                # readings as (n, m) rows, column by column
     # the state both keep in their own form: floats and tuples (one device) or arrays (a batch)
     _incisor: Any                             # the incisors' mean force over the last period (N)
     _hand_v: Any                              # the hand's last velocities: x, z, pitch rate, lateral
@@ -223,8 +224,7 @@ class LaryngoscopeBase:
     def blade_pose(self) -> np.ndarray:
         """``(n, 4)``: x, z (m), pitch (rad) of the blade's centre of mass and its lateral y (m)."""
         x, y, a = self.kinematics()[:3]
-        return np.stack([np.asarray(v, dtype=np.float64).reshape(-1) for v in (x, y, a, self._lateral_state()[0])],
-                        axis=-1)
+        return self._rows(x, y, a, self._lateral_state()[0])
 
     def drawing(self) -> list[dict[str, Any]]:
         """What a renderer draws of each device, in the local sagittal frame (m)."""
@@ -243,7 +243,7 @@ class LaryngoscopeBase:
     def haptic_force(self) -> np.ndarray:
         """Force ``(n, 3)`` (world x, y, z; N) that the preset device renders to the hand: the coupling's
         pull on the hand, scaled and saturated (:func:`softenv.devices.presets.render_force`)."""
-        return np.stack(np.broadcast_arrays(*self._rendered()), axis=-1).reshape(-1, 3)
+        return self._rows(*self._rendered())
 
     def _rendered(self) -> tuple[Any, Any, Any]:
         """The coupling's pull on the hand (world x, y, z), as the preset renders it."""
