@@ -21,9 +21,10 @@ split): the period and decay of a damped oscillation err by about ``0.5 zeta ome
 damping ratios (0.14 translational, 0.11 rotational) keep that under 1 % (tested against the
 analytic damped oscillator); heavier damping is stable but less accurate at the same substep.
 
-The single device (:mod:`.single`) runs these functions with :class:`~softenv._ops.ScalarOps` on
-Python floats, the batch (:mod:`.batch`) with :class:`~softenv._ops.ArrayOps` on arrays: the same
-IEEE operations in the same order, so both get the same bits.
+The batch (:mod:`.batch`) runs these functions with :class:`~softenv._ops.ArrayOps` on arrays; the
+single device (:mod:`.single`) runs them with :class:`~softenv._ops.ScalarOps` on Python floats, and
+for its hot substep :func:`tongue_substep_floats`, :func:`tongue_substep` written out for floats
+(tested bit for bit against it). The same IEEE operations in the same order, so both get the same bits.
 """
 
 from __future__ import annotations
