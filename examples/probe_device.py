@@ -126,5 +126,11 @@ class ProbeBatch:
     def drawing(self, i: int) -> None:
         return None
 
+    def state(self) -> np.ndarray:
+        return self.depth.copy()
+
+    def load_state(self, state: np.ndarray) -> None:
+        self.depth = np.array(state, dtype=np.float64)
+
 
 PROBE = DeviceKind("probe", PROBE_OBS, Probe, ProbeBatch)

@@ -122,3 +122,21 @@ def test_the_scene_device_section_reaches_the_torch_backend():
                        device={"max_sideways_force": 12.0})
     assert env.unwrapped.world.config["device"]["max_sideways_force"] == 12.0
     assert str(env.unwrapped.torch_device) == "cpu"
+
+
+@pytest.mark.parametrize("kind", ["ideal", PROBE, "laryngoscope"])
+def test_a_pickled_vector_env_continues_bit_for_bit(kind, probe_on_path):
+    """Every device's batch pickles and deep-copies (the laryngoscope's pymunk space is rebuilt from its
+    state): a copy taken mid-episode continues as the original, through autoresets, bit for bit."""
+    import copy
+
+    env = SoftSphereVectorEnv(3, device={"kind": kind}, task={"horizon": 12}, autoreset_mode="same_step")
+    env.reset(seed=5)
+    actions = np.random.default_rng(2).uniform(-1, 1, (30, 3, 4)).astype(np.float32)
+    for a in actions[:10]:
+        env.step(a)
+    copies = [pickle.loads(pickle.dumps(env)), copy.deepcopy(env)]
+    for a in actions[10:]:
+        ours = env.step(a)
+        for other in copies:
+            assert data_equivalence(ours, other.step(a), exact=True)

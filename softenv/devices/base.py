@@ -113,7 +113,8 @@ class Device(DeviceNames, Protocol):
 @runtime_checkable
 class DeviceBatch(DeviceNames, Protocol):
     """``n`` devices stepped together on arrays (the vector env), bit for bit the single device's
-    arithmetic where the kind says so (the ideal device and device 0 of the laryngoscope exactly)."""
+    arithmetic where the kind says so (the ideal device and device 0 of the laryngoscope exactly).
+    Pickling as :class:`Device` does."""
 
 
     def reset(self, mask: np.ndarray) -> np.ndarray:
@@ -142,6 +143,14 @@ class DeviceBatch(DeviceNames, Protocol):
 
     def drawing(self, i: int) -> dict[str, Any] | None:
         """What a renderer draws of device ``i``."""
+        ...
+
+    def state(self) -> Any:
+        """Everything that the batch rebuilt from the scene needs to continue bit for bit."""
+        ...
+
+    def load_state(self, state: Any) -> None:
+        """Continue from :meth:`state`."""
         ...
 
 

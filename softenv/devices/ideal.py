@@ -113,5 +113,11 @@ class IdealDeviceBatch:
     def drawing(self, i: int) -> None:
         return None
 
+    def state(self) -> None:
+        return None
+
+    def load_state(self, state: None) -> None:
+        pass
+
 
 IDEAL = DeviceKind("ideal", IDEAL_OBS, IdealDevice, IdealDeviceBatch)

@@ -120,7 +120,7 @@ class LaryngoscopePartBatch:
     episode_info_keys = ("clinical",)
 
     def __init__(self, scene: DeviceScene, config: Config, n: int) -> None:
-        self._scene = scene
+        self._scene, self._config = scene, config
         self.laryngoscopes = LaryngoscopeBatch(*laryngoscope_parts(scene, config), n)
         self._start_state = self.laryngoscopes.start_state(n)
         self._workspace = scene.workspace
@@ -166,3 +166,20 @@ class LaryngoscopePartBatch:
 
     def drawing(self, i: int) -> dict[str, Any]:
         return self.laryngoscopes.drawing()[i]
+
+    def state(self) -> Any:
+        return self.laryngoscopes.state()
+
+    def load_state(self, state: Any) -> None:
+        self.laryngoscopes.load_state(state)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["laryngoscopes"] = self.state()           # pymunk's space is rebuilt, not pickled
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        device_state = state.pop("laryngoscopes")
+        self.__dict__.update(state)
+        self.laryngoscopes = LaryngoscopeBatch(*laryngoscope_parts(self._scene, self._config), len(device_state.blade))
+        self.load_state(device_state)
