@@ -15,6 +15,7 @@ from . import LARYNGOSCOPE_OBS
 from .batch import LaryngoscopeBatch
 from .params import LaryngoscopeParams
 from .single import Laryngoscope
+from .space import DeviceState
 
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")
@@ -39,13 +40,39 @@ def incisor_term(incisor_force: Any, weights: dict[str, float]) -> Any:
     return -weights["incisor_weight"] * (incisor_force / weights["safe_force"])
 
 
-class LaryngoscopePart:
+class PickledByState:
+    """Pickles a part's pymunk physics (the attribute ``physics_name``) as its ``state()``, and rebuilds
+    it from the scene when unpickled: pymunk's space cannot be pickled, and a device rebuilt from its
+    state continues bit for bit (:mod:`.space`)."""
+
+    physics_name: str
+    _scene: DeviceScene
+    _config: Config
+
+    def _rebuilt(self, state: DeviceState) -> Any:
+        raise NotImplementedError
+
+    def __getstate__(self) -> dict[str, Any]:
+        out = self.__dict__.copy()
+        out[self.physics_name] = getattr(self, self.physics_name).state()
+        return out
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        device_state = state.pop(self.physics_name)
+        self.__dict__.update(state)
+        physics = self._rebuilt(device_state)
+        physics.load_state(device_state)
+        setattr(self, self.physics_name, physics)
+
+
+class LaryngoscopePart(PickledByState):
     """One laryngoscope in an env (:class:`~softenv.devices.base.Device`); ``laryngoscope`` is its
     physics (:class:`~.single.Laryngoscope`), ``clinical`` its episode's record."""
 
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
     episode_info_keys = ("clinical",)
+    physics_name = "laryngoscope"
 
     def __init__(self, scene: DeviceScene, config: Config) -> None:
         self._scene, self._config = scene, config
@@ -98,19 +125,11 @@ class LaryngoscopePart:
     def load_state(self, state: Any) -> None:
         self.laryngoscope.load_state(state)
 
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["laryngoscope"] = self.state()            # pymunk's space is rebuilt, not pickled
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        device_state = state.pop("laryngoscope")
-        self.__dict__.update(state)
-        self.laryngoscope = Laryngoscope(*laryngoscope_parts(self._scene, self._config))
-        self.load_state(device_state)
+    def _rebuilt(self, state: DeviceState) -> Laryngoscope:
+        return Laryngoscope(*laryngoscope_parts(self._scene, self._config))
 
 
-class LaryngoscopePartBatch:
+class LaryngoscopePartBatch(PickledByState):
     """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`), in one pymunk
     space (:class:`~.batch.LaryngoscopeBatch`): device 0 equals a single one bit for bit, the others
     agree to rounding (each sits at its own place in the space)."""
@@ -118,6 +137,7 @@ class LaryngoscopePartBatch:
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
     episode_info_keys = ("clinical",)
+    physics_name = "laryngoscopes"
 
     def __init__(self, scene: DeviceScene, config: Config, n: int) -> None:
         self._scene, self._config = scene, config
@@ -173,13 +193,5 @@ class LaryngoscopePartBatch:
     def load_state(self, state: Any) -> None:
         self.laryngoscopes.load_state(state)
 
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["laryngoscopes"] = self.state()           # pymunk's space is rebuilt, not pickled
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        device_state = state.pop("laryngoscopes")
-        self.__dict__.update(state)
-        self.laryngoscopes = LaryngoscopeBatch(*laryngoscope_parts(self._scene, self._config), len(device_state.blade))
-        self.load_state(device_state)
+    def _rebuilt(self, state: DeviceState) -> LaryngoscopeBatch:
+        return LaryngoscopeBatch(*laryngoscope_parts(self._scene, self._config), len(state.blade))
