@@ -59,8 +59,8 @@ class _RowPolicy:
     def __init__(self, world: World) -> None:
         self.world = world
         self.k = world.k
-        self.device = world.config["device"]["kind"] == "laryngoscope"
-        self.controller = HandController(world.config)     # used with the laryngoscope only
+        # the laryngoscope's hand realises a force through the coupling; on the ideal device the action is the force
+        self.controller = HandController(world.config) if world.device_kind.name == "laryngoscope" else None
         self._previous: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -80,7 +80,7 @@ class _RowPolicy:
         return rows[:, self.k:2 * self.k] * self.world.sqrt_variance
 
     def _act(self, rows: np.ndarray) -> np.ndarray:
-        if not self.device:                        # the ideal device: the action is the force
+        if self.controller is None:                # the ideal device: the action is the force
             return self._force(rows, rows[:, -4:].copy())
         rest = self.world.force_box.rest_action.astype(np.float64)
         if self._previous is None or len(self._previous) != len(rows):
@@ -103,7 +103,7 @@ class ZeroPolicy(_RowPolicy):
     name = "zero"
 
     def _act(self, rows: np.ndarray) -> np.ndarray:
-        if self.device:                            # the hand holds still: the blade never reaches the tongue
+        if self.controller is not None:            # the hand holds still: the blade never reaches the tongue
             return np.zeros((len(rows), 4))
         return np.repeat(self.world.force_box.rest_action[None].astype(np.float64), len(rows), axis=0)
 

@@ -27,7 +27,8 @@ class SoftSphereVectorEnv(VectorEnv):
     (observations, rewards, flags and infos) bit for bit with the ideal device; with the laryngoscope
     env 0 does, and the others agree to rounding (each device sits at its own place in one pymunk
     space: :mod:`softenv.devices.laryngoscope.space`). ``backend="torch"`` through ``gym.make_vec``
-    makes the torch twin instead (:func:`softenv.envs.make.make_vector_env`). Episodes end after ``max_episode_steps`` (default: the scene's ``task.horizon``).
+    makes the torch twin instead (:func:`softenv.envs.make.make_vector_env`). Episodes end after
+    ``max_episode_steps`` (default: the scene's ``task.horizon``).
     ``autoreset_mode``: ``"next_step"`` (Gymnasium's default: the step after an episode ends resets
     that env and ignores its action) or ``"same_step"`` (reset at once; ``info["final_obs"]`` and
     ``info["final_info"]`` hold the last observation and info, as SB3 needs). Infos are dicts of
