@@ -270,3 +270,29 @@ def test_sb3_adapter_gives_the_clinical_metrics_when_asked():
     typo.reset()
     with pytest.raises(ValueError, match=r"info_keys \['clinic'\] are not info keys.*'clinical'"):
         typo.step(a)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_her_compute_reward_equals_the_step_reward_with_the_incisor_term(env_id):
+    """HER relabels with compute_reward: for the step's own goals it must give the step's reward bit for bit,
+    the incisor term included (a blade levering on the teeth is punished in relabelled transitions too)."""
+    env = gym.make(env_id, obs_mode="dict", reward={"force_weight": 0.5, "smoothness_weight": 0.1}).unwrapped
+    venv = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", obs_mode="dict",
+                        reward={"force_weight": 0.5, "smoothness_weight": 0.1})
+    env.reset(seed=3)
+    venv.reset(seed=3)
+    rewards, relabelled, infos, incisor = [], [], [], []
+    for t in range(60):
+        action = TEETH if t % 3 else PRESS
+        obs, reward, _, _, info = env.step(action)
+        vobs, vreward, _, _, vinfo = venv.step(np.stack([action, PRESS]))
+        assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
+        assert np.array_equal(venv.compute_reward(vobs["achieved_goal"], vobs["desired_goal"], vinfo), vreward)
+        rewards.append(reward)
+        infos.append(info)
+        relabelled.append(obs)
+        incisor.append(info["reward_incisor"])
+    assert min(incisor) < -0.05              # the blade did lever on the teeth
+    batch = env.compute_reward(np.stack([o["achieved_goal"] for o in relabelled]),
+                               np.stack([o["desired_goal"] for o in relabelled]), np.array(infos))
+    assert np.array_equal(batch, np.array(rewards))          # HER's call: arrays of goals, an array of infos

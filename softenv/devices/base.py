@@ -89,8 +89,9 @@ class Device(DeviceNames, Protocol):
         ...
 
     def report(self, info: dict[str, Any]) -> float:
-        """Add this step's ``info_keys`` to ``info`` (its reward terms among them); returns the sum of
-        its reward terms."""
+        """Add this step's ``info_keys`` to ``info`` (its reward terms among them, named ``reward_*``);
+        returns the sum of its reward terms, added left to right in the order written (HER's
+        ``compute_reward`` sums them again from ``info``)."""
         ...
 
     def episode_info(self, b: np.ndarray) -> dict[str, Any]:
@@ -134,7 +135,7 @@ class DeviceBatch(DeviceNames, Protocol):
 
     def report(self, info: dict[str, Any], stepped: np.ndarray) -> Any:
         """Add the ``info_keys`` (arrays over all devices) to ``info`` and record the ``stepped`` rows;
-        returns the sum of the reward terms (an array, or 0.0)."""
+        returns the sum of the reward terms (``reward_*`` keys, as :meth:`Device.report`; an array, or 0.0)."""
         ...
 
     def episode_info(self, i: int, b: np.ndarray) -> dict[str, Any]:

@@ -43,6 +43,19 @@ class Episodes:
     oracle_cum: np.ndarray        # (n, H) cumulative error ratio of the exact oracle
 
 
+TASK_TERMS = ("reward_shape", "reward_force", "reward_smooth")   # the device's terms are its other reward_* keys
+
+
+def other_reward_terms(info: dict[str, Any]) -> Any:
+    """A step's reward without its shape term, from its ``info``: ``force + smooth + device``, where
+    ``device`` sums the device's ``reward_*`` keys in the order it wrote them (as its ``report`` returns)."""
+    device = [value for key, value in info.items() if key.startswith("reward_") and key not in TASK_TERMS]
+    extra = device[0] if device else 0.0
+    for value in device[1:]:
+        extra = extra + value
+    return info.get("reward_force", 0.0) + info.get("reward_smooth", 0.0) + extra
+
+
 class World:
     """The composed environment rules for one validated scene config (see the module docstring)."""
 
@@ -169,16 +182,17 @@ class World:
         return -self.weights["shape_weight"] * np.sqrt(np.sum(d * d, axis=-1) / sq_ref)
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> Any:
-        """Reward from goals (dict observations; vectorised over leading axes, for HER).
-
-        The shape term is recomputed from the float32 goals (:meth:`goal_shape_term`); the force and
-        smoothness terms come from ``info["reward_force"]`` and ``info["reward_smooth"]`` (a dict, or
-        an array or list of dicts, one per goal).
+        """Reward from goals (dict observations; vectorised over leading axes, for HER): the step's reward
+        with the shape term recomputed from the float32 goals (:meth:`goal_shape_term`) and every other
+        term read from ``info`` (a dict, or an array or list of dicts, one per goal): ``reward_force``,
+        ``reward_smooth`` and the device's ``reward_*`` keys (the laryngoscope's ``reward_incisor``),
+        summed in the step's order, so that for the step's own goals it equals the step's reward bit
+        for bit.
         """
         shape = self.goal_shape_term(achieved_goal, desired_goal)
         if isinstance(info, dict):
-            return shape + (info.get("reward_force", 0.0) + info.get("reward_smooth", 0.0))
-        extra = np.array([i.get("reward_force", 0.0) + i.get("reward_smooth", 0.0) for i in np.ravel(info)])
+            return shape + other_reward_terms(info)
+        extra = np.array([other_reward_terms(i) for i in np.ravel(info)])
         return shape + extra.reshape(np.shape(info))
 
     # -- episodes -------------------------------------------------------------------------------
