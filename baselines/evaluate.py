@@ -78,8 +78,7 @@ def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int]
     seeded ``seed + i`` (or ``seed[i]``). A policy that plans offline reports its own ``decision_us``."""
     obs_mode = getattr(policy, "obs_mode", "vector")
     env_id, kwargs = scene_kwargs(scene, obs_mode)
-    horizon = kwargs["task"].get("horizon", gym.spec(env_id).max_episode_steps)      # the scene's, over the id's
-    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point", max_episode_steps=horizon,
+    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
                         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
     policy.reset()
     obs, _ = venv.reset(seed=seed)  # type: ignore[arg-type]  # SoftSphere's vector env takes a seed per env

@@ -11,6 +11,14 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 
 import pytest  # noqa: E402
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+# hypothesis profiles for every property test: "ci" (the default) and "long" (SOFTENV_HYPOTHESIS_PROFILE=long)
+_COMMON = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large],
+           "derandomize": True, "print_blob": True}
+settings.register_profile("ci", max_examples=60, **_COMMON)
+settings.register_profile("long", max_examples=1_000, **_COMMON)
+settings.load_profile(os.environ.get("SOFTENV_HYPOTHESIS_PROFILE", "ci"))
 
 _CACHE = tempfile.mkdtemp(prefix="softenv-test-cache-")
 os.environ["SOFTENV_CACHE_DIR"] = _CACHE

@@ -171,7 +171,7 @@ def test_batched_twin_reports_what_single_envs_report(mode):
     layout SyncVectorEnv gives a nested info (per-key arrays with masks)."""
     n = 2
     native = gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                          autoreset_mode=mode, max_episode_steps=30)
+                          autoreset_mode=mode, task={"horizon": 30})
     sync = gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=n, vectorization_mode="sync", task={"horizon": 30},
                         vector_kwargs={"autoreset_mode": mode})
     native.reset(seed=4)

@@ -2,28 +2,21 @@
 id, single env and batched twin: nothing but the documented ``ValueError``, nothing non-finite,
 observations inside ``observation_space``, and the twin's env 0 equal to a single env bit for bit.
 
-Profiles: ``ci`` (default: 60 examples a test, 660 in all, about a minute) and ``long`` (1,000 a test,
+Profiles (tests/conftest.py): ``ci`` (default: 60 examples a test, 660 in all, about a minute) and ``long`` (1,000 a test,
 11,000 in all), run by ``SOFTENV_HYPOTHESIS_PROFILE=long python -m pytest tests/test_properties.py``.
 """
 
 from __future__ import annotations
 
 import math
-import os
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import softenv  # noqa: F401
-
-_COMMON = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large],
-           "derandomize": True, "print_blob": True}
-settings.register_profile("ci", max_examples=60, **_COMMON)
-settings.register_profile("long", max_examples=1_000, **_COMMON)
-settings.load_profile(os.environ.get("SOFTENV_HYPOTHESIS_PROFILE", "ci"))
 
 IDEAL = ["SoftSphere-v0", "SoftSphereViscoelastic-v0", "SoftSphereProcedure-v0"]
 HAPTIC = ["SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0"]

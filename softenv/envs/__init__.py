@@ -22,7 +22,6 @@ ENV_SCENES: dict[str, dict[str, Any]] = {
     "SoftSphereViscoelastic-v0": {"dynamics": {"kind": "viscoelastic"}},
     "SoftSphereProcedure-v0": {"task": {"kind": "procedure"}},
 }
-MAX_EPISODE_STEPS = 100
 
 # laryngoscope ids: 50 Hz control (20 substeps of 1 ms), 5 s to reach, 10 s for the procedure
 _HAPTIC = {"device": {"kind": "laryngoscope"}, "dynamics": {"dt": 0.02}}
@@ -37,11 +36,12 @@ def register_envs() -> None:
     for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items():
         if env_id in gym.registry:
             continue
+        # no max_episode_steps: the episode length is the scene's task.horizon and the env truncates
+        # there itself, so a horizon passed to gym.make, gym.make_vec (any mode) or the torch backend
+        # is honoured alike (a registered limit would cap a longer horizon and override a vector env's)
         gym.register(id=env_id, entry_point="softenv.envs.single:SoftSphereEnv",
-                     vector_entry_point="softenv.envs.make:make_vector_env",
-                     max_episode_steps=scene.get("task", {}).get("horizon", MAX_EPISODE_STEPS),
-                     kwargs={"base_scene": scene})
+                     vector_entry_point="softenv.envs.make:make_vector_env", kwargs={"base_scene": scene})
 
 
-__all__ = ["ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "MAX_EPISODE_STEPS", "default_config", "describe_config", "make_config",
+__all__ = ["ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "default_config", "describe_config", "make_config",
            "register_envs"]

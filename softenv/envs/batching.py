@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
-from .._validation import real_array
+from .._validation import check_int, real_array
 from .world import World
 
 
@@ -31,6 +31,15 @@ def check_actions(actions: Any, n: int) -> np.ndarray:
         i, j = np.argwhere(bad)[0]
         raise ValueError(f"actions[{i}, {j}] = {float(a[i, j])!r}: actions must be finite and within [-1, 1]")
     return a
+
+
+def episode_limit(max_episode_steps: Any, horizon: int) -> int:
+    """Steps before a batched env truncates: the scene's ``task.horizon``, or fewer where
+    ``max_episode_steps`` asks (an outer time limit, as ``gym.make(..., max_episode_steps=m)`` wraps the
+    single env in ``TimeLimit(m)``: the task, its schedule and its score keep the horizon)."""
+    if max_episode_steps is None:
+        return horizon
+    return min(horizon, check_int(max_episode_steps, "max_episode_steps", 1))
 
 
 def autoreset_mode(value: str | AutoresetMode) -> AutoresetMode:

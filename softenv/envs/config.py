@@ -175,7 +175,7 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "kind": Field("reach", "", "reach | procedure", _choice("reach", "procedure"),
                       "reach one target shape, or follow insert -> press -> sweep"),
         "split": Field("train", "", "train | test", _choice("train", "test"), "target set (disjoint in force space)"),
-        "horizon": Field(100, "steps", "1-100000", _int(1, 100_000), "episode length (registered max_episode_steps)"),
+        "horizon": Field(100, "steps", "1-100000", _int(1, 100_000), "episode length: the env truncates here, on every path"),
         "tolerance": Field(0.1, "", "(0, 1)", _real(0, 1, lo_open=True, hi_open=True),
                            "success: shape error below this share of the target's displacement"),
         "terminate_on_success": Field(False, "", "True | False", _bool, "end the episode on success"),

@@ -43,9 +43,7 @@ class SoftSphereSB3VecEnv(VecEnv):
         entry = spec.vector_entry_point
         if not isinstance(entry, str) or not entry.startswith("softenv.envs."):
             raise ValueError(f"env_id={env_id!r} is not a SoftSphere id")
-        # the id's episode length, unless the caller sets task.horizon
-        steps = None if "horizon" in kwargs.get("task", {}) else spec.max_episode_steps
-        self.venv = SoftSphereVectorEnv(num_envs, max_episode_steps=steps, autoreset_mode="same_step",
+        self.venv = SoftSphereVectorEnv(num_envs, autoreset_mode="same_step",
                                         **{**spec.kwargs, **kwargs})
         self.env_id = env_id
         self.info_keys: tuple[str, ...] | None = None if info_keys == "all" else tuple(info_keys)

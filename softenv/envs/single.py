@@ -112,7 +112,10 @@ class SoftSphereEnv(gym.Env):
 
     * Termination: only with ``task.terminate_on_success=True``, when ``is_success``
       (``shape error < task.tolerance`` x target displacement; default 10 %).
-    * Truncation: after ``task.horizon`` steps (the registered ``max_episode_steps``).
+    * Truncation: after ``task.horizon`` steps. The env truncates there itself (the ids register no
+      ``max_episode_steps``), so a horizon set through ``gym.make``, ``gym.make_vec`` in any mode, or the
+      torch backend is honoured alike; ``max_episode_steps=m`` adds a time limit of ``m`` steps on
+      every path, the task keeping its horizon.
 
     ``info`` at every step: the reward terms, ``shape_error_mm`` (RMS over vertices),
     ``force_N`` (the tongue's force), ``peak_force_N`` (episode so far), ``is_success`` and

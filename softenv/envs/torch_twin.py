@@ -38,6 +38,7 @@ from gymnasium.vector.utils import batch_space
 
 from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
+from .batching import episode_limit
 from .config import scene_config
 from .task import reward_terms
 from .torch_graph import GraphedStep
@@ -95,9 +96,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                              f"that makes CUDA graphs of its own (got compile_options={compile_options!r})")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
-        if max_episode_steps is not None:
-            scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
         world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
+        self.max_episode_steps = episode_limit(max_episode_steps, world.horizon)
         if world.device_kind.name != "ideal":
             raise ValueError(f"device.kind={world.config['device']['kind']!r}: the torch backend covers "
                              "device.kind='ideal' only (other devices step on Python floats or numpy: pymunk has "
@@ -230,7 +230,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def _advance(self, a: torch.Tensor, stepped: torch.Tensor) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor,
                                                                          dict[str, torch.Tensor]]:
         """The numpy twin's ``_advance`` (the stepped envs commit their state) on tensors."""
-        w, H = self.world, self.world.horizon
+        w = self.world
         target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
         f = self._mid + a * self._half
         g = self._response(f)
@@ -257,7 +257,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         keep(rows, target, self._last_target)
         self._t += s.to(torch.int64)
         terminated = (success & w.terminate_on_success) & s
-        truncated = (self._t >= H) & s
+        truncated = (self._t >= self.max_episode_steps) & s
         values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                   "shape_error_mm": torch.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                   "is_success": success, "normalized_score": score}
@@ -304,11 +304,11 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def _episodes_may_start(self) -> bool:
         """Whether an env can start an episode this step. Without success termination every episode lasts
-        the horizon and all began at reset(), so the host knows those steps (no read of the flags): one
-        in ``horizon`` steps (same-step autoreset) or ``horizon + 1`` (next-step: the step after the end)."""
+        ``max_episode_steps`` and all began at reset(), so the host knows those steps (no read of the flags):
+        one in ``max_episode_steps`` steps (same-step autoreset) or one more (next-step: the step after the end)."""
         if self.world.terminate_on_success:
             return True
-        period = self.world.horizon + (self.autoreset_mode == AutoresetMode.NEXT_STEP)
+        period = self.max_episode_steps + (self.autoreset_mode == AutoresetMode.NEXT_STEP)
         return self._clock % period == 0
 
     def _restart_rows(self, obs: Any, mask: torch.Tensor, may_start: bool) -> Any:

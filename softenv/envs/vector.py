@@ -11,7 +11,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .._ops import ArrayOps
-from .batching import add_masked, check_actions, obs_row, seeded_episodes
+from .batching import add_masked, check_actions, episode_limit, obs_row, seeded_episodes
 from .batching import autoreset_mode as autoreset_mode_of
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
@@ -27,8 +27,9 @@ class SoftSphereVectorEnv(VectorEnv):
     (observations, rewards, flags and infos) bit for bit with the ideal device; with the laryngoscope
     env 0 does, and the others agree to rounding (each device sits at its own place in one pymunk
     space: :mod:`softenv.devices.laryngoscope.space`). ``backend="torch"`` through ``gym.make_vec``
-    makes the torch twin instead (:func:`softenv.envs.make.make_vector_env`). Episodes end after
-    ``max_episode_steps`` (default: the scene's ``task.horizon``).
+    makes the torch twin instead (:func:`softenv.envs.make.make_vector_env`). Episodes end after the
+    scene's ``task.horizon`` steps, or after ``max_episode_steps`` where that is fewer (a time limit, as
+    ``gym.make(..., max_episode_steps=m)`` puts on the single env; the task keeps its horizon).
     ``autoreset_mode``: ``"next_step"`` (Gymnasium's default: the step after an episode ends resets
     that env and ignores its action) or ``"same_step"`` (reset at once; ``info["final_obs"]`` and
     ``info["final_info"]`` hold the last observation and info, as SB3 needs). Infos are dicts of
@@ -43,9 +44,8 @@ class SoftSphereVectorEnv(VectorEnv):
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
         check_render_mode(render_mode)
-        if max_episode_steps is not None:
-            scene = {**scene, "task": {**scene.get("task", {}), "horizon": max_episode_steps}}
         self.world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
+        self.max_episode_steps = episode_limit(max_episode_steps, self.world.horizon)
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"],
                          "autoreset_mode": self.autoreset_mode}
@@ -162,14 +162,16 @@ class SoftSphereVectorEnv(VectorEnv):
             self._agent_cum[s], self._peak[s], self._last_target[s] = agent_cum[s], peak[s], target[s]
             self._t[s] += 1
         terminated = (success & w.terminate_on_success) & s
-        truncated = (self._t >= w.horizon) & s
+        truncated = (self._t >= self.max_episode_steps) & s
         info_values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                        "shape_error_mm": np.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                        "is_success": success, "normalized_score": score}
         extra = device.report(info_values, s)
         reward = reward + extra
-        done = terminated | truncated
-        if device.episode_info_keys and done.any():          # the device's episode record where one ends
+        # the device's episode record where the task ends an episode (a shorter max_episode_steps ends it
+        # from outside, without one, as TimeLimit does to the single env)
+        done = terminated | ((self._t >= w.horizon) & s)
+        if device.episode_info_keys and done.any():
             ended = np.flatnonzero(done)
             records = {int(i): device.episode_info(int(i), self._b[i]) for i in ended}
             for key in device.episode_info_keys:
