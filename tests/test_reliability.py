@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import io
+import zipfile
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -95,6 +98,12 @@ def _score(capsys, *args: str) -> tuple[int, str]:
     return code, err
 
 
+def _npy_bytes(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()
+
+
 def _npz(path, **columns):
     np.savez(path, **columns)
     return path
@@ -120,9 +129,40 @@ def _bad_files(tmp_path):
     version = _npz(tmp_path / "version.npz", format_version=np.array([1, 1]), **GOOD_COLUMNS)
     directory = tmp_path / "adir.csv"
     directory.mkdir()
-    return {"truncated npz": (truncated, "cannot be read as NPZ"), "random-bytes npz": (random_bytes, "cannot be read"),
+    header = "time_s,insertion_deg,lateral_deg,normal_N,sideways_N"
+    twice = tmp_path / "twice.csv"
+    twice.write_text(header + ",normal_N\n0,90,0,10,0,12\n1,90,0,10,0,12\n")
+    hand = "hand_x_m,hand_z_m,hand_pitch_rad,hand_y_m"
+    both = tmp_path / "both.csv"
+    both.write_text(f"{header},{hand}\n0,90,0,10,0,0,0,0,0\n1,90,0,10,0,0,0,0,0\n")
+    extra = tmp_path / "extra.csv"
+    extra.write_text(header + ",button\n0,90,0,10,0,1\n1,90,0,10,0,0\n")
+    gap = tmp_path / "gap.csv"
+    gap.write_text(f"time_s,{hand}\n0,0,0,0,0\n0.5,0,0,0,0\n599.5,0,0,0,0\n")
+    short_row = tmp_path / "short_row.csv"
+    short_row.write_text(header + "\n0,90,0,10,0\n1,90,0\n")
+    claims = tmp_path / "claims.npz"                  # a header that declares 1e11 numbers over 24 bytes
+    npy = b"\x93NUMPY\x01\x00" + (lambda h: len(h).to_bytes(2, "little") + h)(
+        b"{'descr': '<f8', 'fortran_order': False, 'shape': (100000000000,), }".ljust(118) + b"\n")
+    with zipfile.ZipFile(claims, "w") as archive:
+        archive.writestr("format_version.npy", _npy_bytes(np.array(1)))
+        for key in GOOD_COLUMNS:
+            archive.writestr(f"{key}.npy", npy + bytes(24))
+    bomb = tmp_path / "bomb.npz"                      # 80 MB of zeros, compressed to a few hundred kB
+    with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("format_version.npy", _npy_bytes(np.array(1)))
+        for key in GOOD_COLUMNS:
+            archive.writestr(f"{key}.npy", _npy_bytes(np.zeros(10_000_000)))
+    return {"column twice": (twice, r"columns \['normal_N'\] appear more than once"),
+            "both schemas": (both, "has the columns of force commands and of hand poses; a log holds one schema"),
+            "unknown column": (extra, r"columns \['button'\] are not force commands columns"),
+            "599 s gap": (gap, "row 3, column 'time_s' = 599.5: 599 s after the row before"),
+            "short row": (short_row, "row 2 has 3 fields; the header has 5"),
+            "1e11 elements": (claims, r"member 'time_s' declares shape \(100000000000,\)"),
+            "zip bomb": (bomb, "member 'time_s' inflates to 80,000,128 bytes; at most 8,004,096"),
+"truncated npz": (truncated, "cannot be read as NPZ"), "random-bytes npz": (random_bytes, "cannot be read"),
             "utf-16 csv": (utf16, "cannot be read as CSV"), "binary csv": (binary, "cannot be read as CSV"),
-            "1e7 s": (long, "row 2, column 'time_s' = 1e\\+07: a trajectory lasts at most 600 s"),
+            "1e7 s": (long, "row 2, column 'time_s' = 1e\\+07: the log lasts 1e\\+07 s from its first row; at most 600 s"),
             "unequal columns": (unequal, "unequal lengths"), "non-scalar version": (version, r"format_version=\[1, 1\]"),
             "directory": (directory, "is not a file")}
 
@@ -152,7 +192,7 @@ def test_replay_and_expert_trajectory_validate_their_arguments():
     from softenv.training.scoring import expert_trajectory, replay
 
     good = expert_trajectory(duration_s=1.0)
-    for table, message in [(good[::-1], "strictly increasing"), (good[:0], "at least 2 rows"),
+    for table, message in [(good[::-1], "strictly increasing"), (good[:0], "has 0 rows; a log has 2 to 1,000,000"),
                            (good[:, :4], "5 columns"), (good.astype(complex), "real numbers")]:
         with pytest.raises(ValueError, match=message):
             replay(table)

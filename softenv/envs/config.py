@@ -231,6 +231,17 @@ def check_sections(sections: dict[str, Any], caller: str) -> None:
                                       f"valid sections: {list(SCHEMA)}")
 
 
+def scene_sections(scene: Any, name: str = "scene") -> dict[str, Any]:
+    """A caller's scene: ``None`` (the id's own) or a dict of sections, e.g. ``{"tissue": {"E": 5e3}}``
+    (their keys and values are checked when the config is made)."""
+    if scene is None:
+        return {}
+    if not isinstance(scene, dict):
+        raise ValueError(f"{name}={scene!r} must be a dict of scene sections or None; valid sections: {list(SCHEMA)}")
+    check_sections(scene, name)
+    return dict(scene)
+
+
 def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any],
                  caller: str = "make_config()") -> dict[str, dict[str, Any]]:
     """An env's config: its registered scene overrides, then the caller's sections, merged key by key.

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 
 from .._ops import ScalarOps
-from .batching import check_action_one, target_option
+from .batching import check_action_one, check_seed, target_option
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .task import reward_terms
@@ -176,7 +176,7 @@ class SoftSphereEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         target = target_option(self.world, options)     # check everything before the seed changes anything
-        super().reset(seed=seed)
+        super().reset(seed=check_seed(seed))
         ep = self.world.start_episodes([self.np_random], [target])
         self._target_features, self._target_b = ep.target_features[0], ep.target_b[0]
         self._targets = list(self._target_b)           # row views made once, not every step

@@ -22,7 +22,7 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
-from .batching import seeded_episodes, target_option
+from .batching import check_seeds, seeded_episodes, target_option
 from .task import procedure_features
 from .world import World
 
@@ -154,15 +154,7 @@ class DeviceEpisodes:
     def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
         n = len(self.seed)
         target = target_option(self.world, options)            # everything is checked before the state changes
-        if seed is None:
-            seeds: list[Any] = [None] * n
-        else:
-            seeds = [int(seed) + i for i in range(n)] if isinstance(seed, (int, np.integer)) else list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"seed has {len(seeds)} entries; num_envs={n}")
-            for s in seeds:
-                if s is not None and (isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0):
-                    raise ValueError(f"seed={s!r} must be an int >= 0 or None")
+        seeds: list[Any] = check_seeds(seed, n)
         if not self.seeded:                    # an env never seeded starts from fresh entropy
             entropy = np.random.SeedSequence().entropy
             assert isinstance(entropy, int)              # fresh entropy is one int

@@ -38,7 +38,7 @@ from gymnasium.vector.utils import batch_space
 
 from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
-from .batching import episode_limit
+from .batching import check_actions, episode_limit
 from .config import scene_config
 from .task import reward_terms
 from .torch_graph import GraphedStep
@@ -197,7 +197,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:
-        a = torch.as_tensor(actions, device=self.torch_device)
+        if not isinstance(actions, torch.Tensor):       # host data: the numpy twin's one check (it names the problem)
+            host = check_actions(actions, self.num_envs) if self.check_actions else np.asarray(actions, np.float64)
+            return torch.as_tensor(host, device=self.torch_device).to(self.dtype)
+        a = actions.to(self.torch_device)
         if self.check_actions:
             if tuple(a.shape) != (self.num_envs, 4):
                 raise ValueError(f"actions must have shape ({self.num_envs}, 4); got {tuple(a.shape)}")

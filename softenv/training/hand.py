@@ -14,19 +14,19 @@ import numpy as np
 from ..devices.laryngoscope.params import LaryngoscopeParams
 from ..devices.laryngoscope.physics import hand_action
 from ..envs import HAPTIC_SCENES
-from ..envs.config import scene_config
+from ..envs.config import scene_config, scene_sections
 from ..envs.single import SoftSphereEnv
-from .logs import HAND_LOG, check_limits, check_table
+from .logs import HAND_LOG, MAX_GAP_S, check_limits, check_table
 
 
 def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
     """SoftSphereHaptic-v0's config with ``scene``'s sections merged in."""
-    return scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], dict(scene or {}), "scene")
+    return scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene")
 
 
 def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
     """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
-    scene = dict(scene or {})
+    scene = scene_sections(scene)
     scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
     return SoftSphereEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
 
@@ -59,6 +59,11 @@ def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
     relative[:, 0] -= table[0, 0]
     relative[:, 1:] -= table[0, 1:]
     check_limits(relative, HAND_LOG, hand_limits(config), source)
+    gaps = np.diff(relative[:, 0])
+    if gaps.max() > MAX_GAP_S:
+        i = int(np.argmax(gaps)) + 1
+        raise ValueError(f"{source}: row {i + 1}, column 'time_s' = {table[i, 0]:g}: {gaps[i - 1]:g} s after the row "
+                         f"before; hand poses are interpolated between rows at most {MAX_GAP_S:g} s apart")
     dt = config["dynamics"]["dt"]
     steps = int(math.floor(relative[-1, 0] / dt + 1e-9))
     if steps < 1:

@@ -3,20 +3,23 @@
 A log is a table with a ``time_s`` column and one row per sample, stored as CSV (a header row;
 lines starting with ``#`` are comments) or NPZ (one 1-D array per column, plus an integer
 ``format_version``; read with ``allow_pickle=False``). Which schema a file holds follows from its
-columns. Files over 64 MB are refused before they are read; every problem is a ``ValueError``
-naming the file, and the row (1 = first data row) and column where one applies.
+columns: exactly one schema's columns, each once (a column twice, the columns of both schemas, or a
+column of neither is refused by name). Files over 64 MB (``MAX_FILE_BYTES``), more than
+``MAX_ROWS`` rows, or NPZ members whose headers or inflated sizes claim more are refused before
+anything is allocated; every problem is a ``ValueError`` naming the file, and the row (1 = first
+data row) and column where one applies.
 
 **Force commands** (``FORCE_LOG``, format_version 1): what the ideal device is told.
 
 | column | unit | allowed |
 |---|---|---|
-| ``time_s`` | s | finite, >= 0, strictly increasing, at most 600 (``MAX_DURATION_S``) |
+| ``time_s`` | s | finite, strictly increasing, at most 600 s (``MAX_DURATION_S``) after the first row |
 | ``insertion_deg`` | deg | within the scene's ``device.insertion_deg`` |
 | ``lateral_deg`` | deg | within +- ``device.lateral_deg`` |
 | ``normal_N`` | N | within [0, ``device.max_normal_force``] |
 | ``sideways_N`` | N | within +- ``device.max_sideways_force`` |
 
-Each row is held until the next (zero-order hold).
+Each row is held until the next (zero-order hold); time counts from the first row.
 
 **Hand poses** (``HAND_LOG``, format_version 1): what a haptic device records of the hand holding
 the laryngoscope (the grip), in the sagittal frame of :mod:`softenv.devices.laryngoscope` (``x``
@@ -30,8 +33,9 @@ toward the patient's front, out of the mouth; ``z`` up; pitch counter-clockwise,
 | ``hand_pitch_rad`` | rad | relative to the first row; within [-0.5, 0.5] |
 | ``hand_y_m`` | m | relative to the first row; within +- the tongue's radius |
 
-Poses are relative to the first row, which is the device's start pose (so a device's own origin
-does not matter), and are interpolated linearly between rows (a device samples a continuous path).
+Poses and times are relative to the first row, which is the device's start pose (so a device's own
+origin and clock do not matter), and are interpolated linearly between rows (a device samples a
+continuous path), which are at most ``MAX_GAP_S`` = 1 s apart (beyond that the path is unknown).
 Resampled at the scene's control period, the hand must not move faster than the device lets it:
 ``device.max_hand_speed`` along and across the blade, ``max_pitch_rate``, ``max_sweep_speed``.
 """
@@ -51,6 +55,8 @@ from .._artifact import atomic_write
 LOG_VERSION = 1
 MAX_DURATION_S = 600.0          # ten minutes: any laryngoscopy attempt; longer logs are refused up front
 MAX_FILE_BYTES = 64 << 20
+MAX_GAP_S = 1.0                 # hand poses are interpolated between rows: a longer gap leaves the path unknown
+MAX_ROWS = 1_000_000            # 600 s sampled at 1.67 kHz; a table of them is 40 MB
 
 
 @dataclass(frozen=True)
@@ -68,7 +74,9 @@ SCHEMAS = (FORCE_LOG, HAND_LOG)
 
 def read_log(path: str | Path, schema: Schema | None = None) -> tuple[Schema, np.ndarray]:
     """Read and check a log file; returns its schema (``schema``, or the one its columns name) and an
-    ``(n, 5)`` float table in the schema's column order."""
+    ``(n, 5)`` float table in the schema's column order. Sizes are checked before anything is
+    allocated (``MAX_FILE_BYTES`` on disk, ``MAX_ROWS`` rows, an NPZ's members by their headers), and
+    a CSV is parsed row by row, so memory stays bounded whatever the file claims."""
     path = Path(path)
     name = f"trajectory {str(path)!r}"
     if not path.exists():
@@ -88,25 +96,43 @@ def read_log(path: str | Path, schema: Schema | None = None) -> tuple[Schema, np
 
 
 def _pick_schema(present: list[str], name: str, schema: Schema | None) -> Schema:
-    """The schema whose columns the file has; an error lists what is missing from each."""
+    """The one schema whose columns the file has, exactly: a column twice, columns of two schemas, or a
+    column of none is refused by name, so that no file is read two ways; an error lists what is missing."""
+    repeated = sorted({c for c in present if present.count(c) > 1})
+    if repeated:
+        raise ValueError(f"{name}: columns {repeated} appear more than once; each column once")
     candidates = [schema] if schema is not None else list(SCHEMAS)
-    for s in candidates:
-        if all(c in present for c in s.columns):
-            return s
-    best = max(candidates, key=lambda s: sum(c in present for c in s.columns))
-    missing = [c for c in best.columns if c not in present]
-    others = "; or ".join(f"{s.name}: {list(s.columns)}" for s in candidates if s is not best)
-    return _raise(f"{name}: missing columns {missing}; has {present}, {best.name} need {list(best.columns)}"
-                  + (f" (or {others})" if others else ""))
-
-
-def _raise(message: str) -> Any:
-    raise ValueError(message)
+    complete = [s for s in candidates if all(c in present for c in s.columns)]
+    if len(complete) > 1:
+        raise ValueError(f"{name} has the columns of {' and of '.join(s.name for s in complete)}; a log holds one "
+                         "schema (split it into two files)")
+    if not complete:
+        best = max(candidates, key=lambda s: sum(c in present for c in s.columns))
+        missing = [c for c in best.columns if c not in present]
+        others = "; or ".join(f"{s.name}: {list(s.columns)}" for s in candidates if s is not best)
+        raise ValueError(f"{name}: missing columns {missing}; has {present}, {best.name} need {list(best.columns)}"
+                         + (f" (or {others})" if others else ""))
+    found = complete[0]
+    extra = [c for c in present if c not in found.columns]
+    if extra:
+        raise ValueError(f"{name}: columns {extra} are not {found.name} columns {list(found.columns)}; a log holds "
+                         "exactly its schema's columns (remove the others)")
+    return found
 
 
 def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray]:
     if not zipfile.is_zipfile(path):         # np.load would try it as a pickle and talk about that
         raise ValueError(f"{name} cannot be read as NPZ: not a zip archive")
+    with zipfile.ZipFile(path) as archive:
+        members = [m for m in archive.infolist()]
+        names = [m.filename.removesuffix(".npy") for m in members]
+        if len(members) > 2 * len(SCHEMAS[0].columns) + 1:
+            raise ValueError(f"{name} has {len(members)} members; a log has one per column and format_version")
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise ValueError(f"{name}: members {repeated} appear more than once; each column once")
+        for member, key in zip(members, names):     # sizes from the headers, before anything is inflated
+            _check_member(archive, member, key, name)
     with np.load(path, allow_pickle=False) as data:
         if "format_version" not in data:
             raise ValueError(f"{name}: no format_version; this softenv reads format_version={LOG_VERSION}")
@@ -134,47 +160,80 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
     return schema, np.stack([columns[c].astype(np.float64) for c in schema.columns], axis=1)
 
 
+def _check_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, key: str, name: str) -> None:
+    """One NPZ member's size, from the zip directory and the ``.npy`` header alone: at most ``MAX_ROWS``
+    numbers of at most 8 bytes (a header may claim anything; the inflated size must match it)."""
+    limit = MAX_ROWS * 8 + 4096
+    if member.file_size > limit:
+        raise ValueError(f"{name}: member {key!r} inflates to {member.file_size:,} bytes; at most {limit:,} "
+                         f"({MAX_ROWS:,} rows)")
+    with archive.open(member) as fh:
+        try:
+            version = np.lib.format.read_magic(fh)
+            shape, _, dtype = (np.lib.format.read_array_header_1_0(fh) if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0(fh))
+        except ValueError as exc:
+            raise ValueError(f"{name}: member {key!r} is not a .npy array: {exc}") from None
+    count = int(np.prod(shape, dtype=object))
+    if count > MAX_ROWS or dtype.itemsize > 8:
+        raise ValueError(f"{name}: member {key!r} declares shape {shape} of {dtype}; at most {MAX_ROWS:,} numbers "
+                         "of at most 8 bytes")
+
+
 def _read_csv(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray]:
     with open(path, newline="", encoding="utf-8") as fh:
-        rows = [r for r in csv.reader(line for line in fh if not line.startswith("#"))]
-    if not rows:
-        raise ValueError(f"{name} is empty; expected a header row")
-    header = [h.strip() for h in rows[0]]
-    schema = _pick_schema(header, name, schema)
-    index = [header.index(c) for c in schema.columns]
-    table = np.empty((len(rows) - 1, len(schema.columns)))
-    for i, row in enumerate(rows[1:], start=1):
-        for j, (col, k) in enumerate(zip(schema.columns, index)):
-            try:
-                table[i - 1, j] = float(row[k])
-            except (ValueError, IndexError):
-                raise ValueError(f"{name}: row {i}, column {col!r}: {row[k] if k < len(row) else ''!r} "
-                                 "is not a number") from None
-    return schema, table
+        rows = csv.reader(line for line in fh if not line.startswith("#"))
+        header = [h.strip() for h in next(rows, [])]
+        if not header:
+            raise ValueError(f"{name} is empty; expected a header row")
+        schema = _pick_schema(header, name, schema)
+        index = [header.index(c) for c in schema.columns]
+        table = np.empty((1024, len(schema.columns)))          # grown by doubling, up to MAX_ROWS rows
+        n = 0
+        for i, row in enumerate(rows, start=1):
+            if i > MAX_ROWS:
+                raise ValueError(f"{name} has more than {MAX_ROWS:,} rows; at most {MAX_ROWS:,} are read")
+            if len(row) != len(header):
+                raise ValueError(f"{name}: row {i} has {len(row)} fields; the header has {len(header)}")
+            if n == len(table):
+                table = np.concatenate([table, np.empty_like(table)])
+            for j, (col, k) in enumerate(zip(schema.columns, index)):
+                try:
+                    table[n, j] = float(row[k])
+                except ValueError:
+                    raise ValueError(f"{name}: row {i}, column {col!r}: {row[k]!r} is not a number") from None
+            n += 1
+    return schema, table[:n]
 
 
 def check_table(table: Any, schema: Schema, source: str = "trajectory") -> np.ndarray:
     """The rules every log shares, on an in-memory table: ``(n, 5)`` real numbers in the schema's
-    column order, at least 2 rows, finite, times from 0 strictly increasing, at most ``MAX_DURATION_S``."""
-    table = np.asarray(table)
+    column order, 2 to ``MAX_ROWS`` rows, finite, times strictly increasing over at most
+    ``MAX_DURATION_S`` (counted from the first row: a device's own clock does not matter)."""
+    try:
+        table = np.asarray(table)
+    except ValueError as exc:                        # ragged rows
+        raise ValueError(f"{source} must be a table of real numbers with {len(schema.columns)} columns "
+                         f"{list(schema.columns)}: {exc}") from None
     if table.ndim != 2 or table.shape[1] != len(schema.columns) or table.dtype.kind not in "iuf":
         raise ValueError(f"{source} must be a table of real numbers with {len(schema.columns)} columns "
                          f"{list(schema.columns)}, got shape {table.shape} and dtype {table.dtype}")
-    if len(table) < 2:
-        raise ValueError(f"{source}: needs at least 2 rows, has {len(table)}")
+    if not 2 <= len(table) <= MAX_ROWS:
+        raise ValueError(f"{source}: has {len(table):,} rows; a log has 2 to {MAX_ROWS:,}")
+    table = table.astype(np.float64, copy=False)
     bad = ~np.isfinite(table)
     if bad.any():
         i, j = np.argwhere(bad)[0]
         raise ValueError(f"{source}: row {i + 1}, column {schema.columns[j]!r} = {float(table[i, j])!r} is not finite")
     t = table[:, 0]
-    if t[0] < 0 or (np.diff(t) <= 0).any():
-        i = 0 if t[0] < 0 else int(np.argmax(np.diff(t) <= 0)) + 1
-        raise ValueError(f"{source}: row {i + 1}, column 'time_s' = {float(t[i])!r}: times must be >= 0 and strictly "
-                         "increasing")
-    if t[-1] > MAX_DURATION_S:
-        raise ValueError(f"{source}: row {len(t)}, column 'time_s' = {t[-1]:g}: a trajectory lasts at most "
-                         f"{MAX_DURATION_S:g} s")
-    return table.astype(np.float64, copy=False)
+    if (np.diff(t) <= 0).any():
+        i = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise ValueError(f"{source}: row {i + 1}, column 'time_s' = {float(t[i])!r}: times must be strictly "
+                         f"increasing (row {i} has {float(t[i - 1])!r})")
+    if t[-1] - t[0] > MAX_DURATION_S:
+        raise ValueError(f"{source}: row {len(t)}, column 'time_s' = {t[-1]:g}: the log lasts {t[-1] - t[0]:g} s "
+                         f"from its first row; at most {MAX_DURATION_S:g} s")
+    return table
 
 
 def check_limits(table: np.ndarray, schema: Schema, limits: dict[str, tuple[float, float]], source: str) -> None:

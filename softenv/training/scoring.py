@@ -32,7 +32,7 @@ from .. import clinical
 from .._artifact import atomic_write
 from .._validation import check_choice, check_real
 from ..devices.laryngoscope.physics import hand_action
-from ..envs.config import make_config
+from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..envs.single import SoftSphereEnv
 from .hand import hand_actions, haptic_config, haptic_env, relative_hand_pose
@@ -106,13 +106,15 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
 
     Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``.
     """
-    table = check_trajectory(table)
-    config = make_config(**(scene or {}))
+    table = check_trajectory(table).copy()
+    table[:, 0] -= table[0, 0]                       # time counts from the first row
+    config = make_config(**scene_sections(scene))
     check_ranges(table, config)
     dt = config["dynamics"]["dt"]
     times = (np.arange(max(1, int(math.floor(table[-1, 0] / dt + 1e-9)))) + 1) * dt
     rows = np.clip(np.searchsorted(table[:, 0], times - dt, side="right") - 1, 0, len(table) - 1)
-    overrides = {**(scene or {}), "task": {**(scene or {}).get("task", {}), "kind": "reach", "horizon": len(times)}}
+    sections = scene_sections(scene)
+    overrides = {**sections, "task": {**sections.get("task", {}), "kind": "reach", "horizon": len(times)}}
     env = SoftSphereEnv(**overrides)
     world = env.world
     features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
@@ -170,7 +172,7 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
     """
     check_real(duration_s, "duration_s", 0.1, MAX_DURATION_S)
     check_choice(style, "style", ("expert", "too_forceful", "wrong_direction"))
-    config = make_config(**(scene or {}))
+    config = make_config(**scene_sections(scene))
     task, dev = config["task"], config["device"]
     target = np.array([np.mean(task["target_insertion_deg"]), np.mean(task["target_lateral_deg"]),
                        np.mean(task["target_normal_force"]), np.mean(task["target_sideways_force"])])
@@ -249,11 +251,11 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
         parts, trainee, expert = score_hand_log(table, scene, source)
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
     else:
-        config = make_config(**(scene or {}))
+        config = make_config(**scene_sections(scene))
         check_ranges(table, config, source)
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
         parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
-    report = {"trajectory": str(path), "log": schema.name, "scene": scene or {}, **parts, "weights": weights,
+    report = {"trajectory": str(path), "log": schema.name, "scene": scene_sections(scene), **parts, "weights": weights,
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
     if out_dir is not None:
         out = Path(out_dir)

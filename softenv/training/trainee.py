@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_real
+from .._validation import check_int, check_real
 from ..control import HandController
 from .hand import hand_limits, haptic_config, haptic_env, relative_hand_pose, speed_limited
+from .logs import HAND_LOG, check_table
 
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
@@ -58,8 +59,9 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
     for name, value, high in (("tremor", tremor, 5.0), ("hesitation", hesitation, 60.0), ("lever", lever, 0.5),
                               ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
         check_real(value, name, 0.0, high)
-    log = np.array(log, dtype=np.float64)
-    t: np.ndarray = log[:, 0]
+    check_int(seed, "seed", 0, 2**32 - 1)
+    log = check_table(log, HAND_LOG, "log").copy()
+    t: np.ndarray = log[:, 0] - log[0, 0]                  # the log's own clock does not matter
     pose = log[:, 1:].copy()
     duration = t[-1]
     ramp = lambda a, b: 0.5 - 0.5 * np.cos(np.pi * np.clip((t / duration - a) / (b - a), 0.0, 1.0))  # noqa: E731
