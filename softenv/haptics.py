@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import check_array, check_real
+from ._validation import check_array, check_real, real_array
 from .devices.laryngoscope.part import laryngoscope_parts
 from .devices.laryngoscope.single import Laryngoscope
 from .envs import HAPTIC_SCENES
@@ -78,12 +78,11 @@ class HapticLoop:
     def tick(self, hand_pose: Any) -> np.ndarray:
         """Advance one period toward ``hand_pose`` (x, z, pitch, y); returns the force ``(3,)`` (N, world
         x, y, z) to render to the hand."""
-        try:                                  # plain floats: a tick's budget has no room for array checks
-            pose = [float(v) for v in (hand_pose.tolist() if isinstance(hand_pose, np.ndarray) else hand_pose)]
-        except (TypeError, ValueError):
-            pose = []
-        if len(pose) != 4 or not all(map(math.isfinite, pose)):
-            check_array(hand_pose, "hand_pose", ndim=1, shape=(4,))         # names the problem
+        pose = hand_pose.tolist() if type(hand_pose) is np.ndarray and hand_pose.dtype == np.float64 else hand_pose
+        # plain floats: a tick's budget has no room for array checks; anything else goes through the one rule
+        if type(pose) is not list or len(pose) != 4 or not all(type(v) is float for v in pose):
+            pose = real_array(hand_pose, "hand_pose", (4,)).astype(np.float64).tolist()
+        if not all(map(math.isfinite, pose)):
             raise ValueError(f"hand_pose must be 4 finite numbers (x, z, pitch, y), got {hand_pose!r}")
         now = self.device.hand_pose
         v = [(min(max(p, lo), hi) - q) / self.period for p, lo, hi, q in zip(pose, self._low, self._high, now)]

@@ -97,3 +97,115 @@ def test_pickled_envs_keep_their_time_limit():
     assert again.max_episode_steps == 4
     with pytest.raises(ValueError, match=r"max_episode_steps=0 is out of range; allowed range \[1, inf\]"):
         gym.make_vec("SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=0)
+
+
+# -- logs the project writes itself: accepted, and replayed to the recorded shape error ----------------
+
+def _recorded(actions: np.ndarray, offset: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
+    """A hand log recorded from an env run (poses at every control period, the clock starting at
+    ``offset``), its shape errors, and whether the hand ever stood on a wall of its workspace."""
+    from softenv.training.hand import haptic_env, relative_box, relative_hand_pose
+
+    env = haptic_env(None, len(actions))
+    world = env.world
+    env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
+    poses, errors = [relative_hand_pose(env)], []
+    for a in actions:
+        errors.append(env.step(np.asarray(a, np.float32))[4]["shape_error_mm"])
+        poses.append(relative_hand_pose(env))
+    low, high = relative_box(env.device.laryngoscope.params)
+    poses = np.array(poses)
+    walls = bool(((poses <= low + 1e-9) | (poses >= high - 1e-9)).any())
+    times = offset + np.arange(len(poses)) * world.config["dynamics"]["dt"]
+    return np.column_stack([times, poses]), np.array(errors), walls
+
+
+keys = st.lists(st.lists(st.sampled_from([-1.0, 0.0, 1.0]), min_size=4, max_size=4), min_size=2, max_size=60)
+uniform = st.lists(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), min_size=2, max_size=60)
+
+
+@settings(max_examples=25)
+@given(actions=keys | uniform, offset=st.sampled_from([0.0, 1000.0, 86_400.0]))
+def test_every_log_recorded_from_an_env_run_is_accepted_and_replays_to_its_shape_error(actions, offset):
+    """Full-speed moves (keys held together, walls met) are within the device's limits, a clock that
+    starts anywhere is fine, and the replay gives the recorded shape error at every step: exactly off the
+    walls, within 2 % where a wall stopped the hand within a period (the poses do not say when)."""
+    from softenv.training.scoring import replay_hand
+
+    log, errors, walls = _recorded(np.array(actions), offset)
+    replayed = replay_hand(log).error_mm
+    if walls:
+        np.testing.assert_allclose(replayed, errors, rtol=0.02)
+    else:
+        np.testing.assert_allclose(replayed, errors, rtol=1e-9)
+
+
+def test_keys_held_together_into_a_wall_replay_bit_for_bit():
+    """The session a keyboard makes: full-speed moves, two keys at once, into the walls."""
+    from softenv.training.scoring import replay_hand
+
+    actions = np.array([[1, 0, 0, 0]] * 5 + [[1, 1, 0, 0]] * 10 + [[0, 1, 1, 0]] * 10 + [[0, 0, 1, 1]] * 10
+                       + [[1, 1, 1, 1]] * 10 + [[-1, -1, 0, 0]] * 10, float)
+    log, errors, walls = _recorded(actions)
+    assert walls and np.array_equal(replay_hand(log).error_mm, errors)
+
+
+# -- wrong types: refused by name on every env and backend, the state left as it was -------------------
+
+def _envs() -> dict:
+    return {"single": gym.make("SoftSphere-v0", **SMALL).unwrapped,
+            "vector": gym.make_vec("SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", **SMALL),
+            "torch": gym.make_vec("SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                                  backend="torch", **SMALL),
+            "haptic": gym.make("SoftSphereHaptic-v0", **SMALL).unwrapped}
+
+
+ENVS = _envs()
+bad_seeds = st.one_of(st.floats(allow_nan=True), st.text(max_size=3), st.integers(max_value=-1),
+                      st.integers(min_value=2**64, max_value=2**70), st.booleans(), st.just(object()),
+                      st.lists(st.integers(0, 9), min_size=3, max_size=3))
+bad_options = st.one_of(st.integers(), st.text(max_size=3), st.lists(st.integers(), max_size=2),
+                        st.dictionaries(st.sampled_from(["goal", "targets", "seed"]), st.integers(), min_size=1),
+                        st.fixed_dictionaries({"target": st.sampled_from([None, "a", [1, 2], [2.0, 0, 0, 0]])}))
+bad_actions = st.one_of(st.none(), st.text(max_size=4), st.just(object()), st.just([[0, 0, 0, 0], [0, 0]]),
+                        st.sampled_from([np.array([["1"] * 4] * 2), np.zeros((2, 4), complex),
+                                         np.full((2, 4), np.nan), np.full((2, 4), 1.5), np.zeros((3, 4)),
+                                         np.array([[object()] * 4] * 2), np.zeros((2, 4), bool)]))
+
+
+def _after(env, name: str):
+    """The next observation after a seeded reset and one step: equal for envs in the same state."""
+    action = np.zeros(4) if name in ("single", "haptic") else np.zeros((2, 4))
+    out = env.step(action)[0]
+    return np.asarray(out.cpu() if hasattr(out, "cpu") else out)
+
+
+@settings(max_examples=40)
+@given(name=st.sampled_from(list(ENVS)), what=st.sampled_from(["seed", "options", "action"]), data=st.data())
+def test_wrong_types_are_refused_by_name_and_change_nothing(name, what, data):
+    env = ENVS[name]
+    env.reset(seed=5)
+    single = name in ("single", "haptic")
+    with pytest.raises(ValueError) as refused:
+        if what == "seed":
+            bad = data.draw(bad_seeds.filter(lambda s: not (single and isinstance(s, list))))
+            env.reset(seed=bad)
+        elif what == "options":
+            env.reset(options=data.draw(bad_options))
+        else:
+            bad = data.draw(bad_actions)
+            env.step(bad[0] if single and isinstance(bad, np.ndarray) else bad)
+    assert {"seed": "seed", "options": "options", "action": "action"}[what] in str(refused.value)
+    after = _after(env, name)
+    env.reset(seed=5)
+    assert np.array_equal(_after(env, name), after)
+
+
+def test_actions_of_any_real_dtype_leave_python_floats_in_the_state_and_the_reward():
+    env = gym.make("SoftSphereHaptic-v0", **SMALL).unwrapped
+    env.reset(seed=0)
+    _, reward, *_ = env.step(np.full(4, 0.5, np.longdouble))
+    assert type(reward) is float and all(type(x) is float for x in env._prev)
+    venv = ENVS["vector"]
+    venv.reset(seed=0)
+    assert venv.step(np.zeros((2, 4), np.longdouble))[1].dtype == np.float64

@@ -41,10 +41,8 @@ def relative_hand_pose(env: Any) -> np.ndarray:
 
 def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
     """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
-    p = LaryngoscopeParams.from_config(config)
-    low, high = p.hand_box
-    start = (*p.grip_start, 0.0, 0.0)
-    return {c: (lo - s, hi - s) for c, lo, hi, s in zip(HAND_LOG.columns[1:], low, high, start)}
+    low, high = relative_box(LaryngoscopeParams.from_config(config))
+    return {c: (float(lo), float(hi)) for c, lo, hi in zip(HAND_LOG.columns[1:], low, high)}
 
 
 def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
@@ -75,16 +73,86 @@ def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
     names = ("hand_x_m / hand_z_m (along the blade)", "hand_x_m / hand_z_m (across the blade)", "hand_y_m",
              "hand_pitch_rad")
     limits = (p.max_hand_speed, p.max_hand_speed, p.max_sweep_speed, p.max_pitch_rate)
+    box = relative_box(p)
     for k in range(steps):
-        v = (poses[k + 1] - poses[k]) / dt
-        a = hand_action(v[0], v[1], v[2], v[3], poses[k, 2], p)
-        worst = int(np.argmax(np.abs(a)))
-        if abs(a[worst]) > 1.0 + 1e-6:
+        if action_to(poses[k], poses[k + 1], dt, p, box) is None:
+            v = (poses[k + 1] - poses[k]) / dt
+            a = hand_action(v[0], v[1], v[2], v[3], poses[k, 2], p)
+            worst = int(np.argmax(np.abs(a)))
             row = int(np.searchsorted(relative[:, 0], times[k + 1] - 1e-12)) + 1
             raise ValueError(f"{source}: row {row}, column {names[worst]!r}: the hand moves at "
                              f"{abs(a[worst]) * limits[worst]:.3g} {'rad/s' if worst == 3 else 'm/s'} near "
                              f"time_s = {table[0, 0] + times[k + 1]:g}; the device allows [0, {limits[worst]:g}]")
     return times[1:], poses
+
+
+def relative_box(p: LaryngoscopeParams) -> tuple[np.ndarray, np.ndarray]:
+    """The hand's workspace relative to its start pose, in hand-log column order (x, z, pitch, y)."""
+    low, high = p.hand_box
+    start = np.array([*p.grip_start, 0.0, 0.0])
+    return np.array(low) - start, np.array(high) - start
+
+
+def action_to(now: np.ndarray, goal: np.ndarray, dt: float, p: LaryngoscopeParams,
+              box: tuple[np.ndarray, np.ndarray], tol: float = 1e-6) -> np.ndarray | None:
+    """The action in [-1, 1] that moves the hand from pose ``now`` to ``goal`` (relative poses) in one control
+    period, or ``None`` if the device cannot.
+
+    Off the workspace's walls the move fixes the action (:func:`hand_action`). An axis that ends on a wall
+    was stopped there, so the action may have asked for more along it: the hand's walls clip the world
+    x, z, pitch and y velocities, while the action bounds the velocities in the hand's frame (at full
+    insert and press the hand moves up to sqrt(2) times the speed along a world axis). Among the
+    actions that reach ``goal``, the one that drives hardest into the walls is taken: it reaches them
+    soonest, as the full-speed action that usually put the hand there did.
+    """
+    v = (goal - now) / dt
+    action = np.array(hand_action(v[0], v[1], v[2], v[3], now[2], p))
+    low, high = box
+    side = np.where(goal >= high - 1e-9, 1.0, np.where(goal <= low + 1e-9, -1.0, 0.0))
+    wall = side * (side * (goal - now) >= 0.0)                # ends on a wall it moved toward (or sat at)
+    if not wall.any():
+        return np.clip(action, -1.0, 1.0) if np.abs(action).max() <= 1.0 + tol else None
+    scale = np.array([p.max_sweep_speed, p.max_pitch_rate])              # y <- action[2], pitch <- action[3]
+    for axis, j, speed in ((3, 2, scale[0]), (2, 3, scale[1])):
+        if wall[axis]:
+            if wall[axis] * v[axis] > speed * (1.0 + tol):
+                return None
+            action[j] = wall[axis]
+        elif abs(action[j]) > 1.0 + tol:
+            return None
+    if wall[0] or wall[1]:
+        planar = _planar_action(v[:2], wall[:2], now[2], p.max_hand_speed, tol)
+        if planar is None:
+            return None
+        action[:2] = planar
+    elif max(abs(action[0]), abs(action[1])) > 1.0 + tol:
+        return None
+    return np.clip(action, -1.0, 1.0)
+
+
+def _planar_action(v: np.ndarray, wall: np.ndarray, pitch: float, speed: float, tol: float) -> np.ndarray | None:
+    """Insert and press ``(a0, a1)`` in the square whose world velocity ``speed * M a`` equals ``v`` on the
+    free axes and reaches at least ``v`` into the walls on the others, driving hardest into them (a linear
+    programme in two variables, solved at the vertices of its feasible polygon)."""
+    c, s = math.cos(pitch), math.sin(pitch)
+    M = speed * np.array([[-c, s], [-s, -c]])                  # hand_command's world velocity per unit action
+    lines = [(np.array([1.0, 0.0]), e) for e in (-1.0, 1.0)] + [(np.array([0.0, 1.0]), e) for e in (-1.0, 1.0)]
+    lines += [(M[i], v[i]) for i in range(2)]
+    best, best_value = None, -math.inf
+    for i in range(len(lines)):
+        for j in range(i + 1, len(lines)):
+            A = np.array([lines[i][0], lines[j][0]])
+            if abs(np.linalg.det(A)) < 1e-12:
+                continue
+            a = np.linalg.solve(A, [lines[i][1], lines[j][1]])
+            w = M @ a
+            fits = np.all(np.abs(a) <= 1.0 + tol) and all(
+                abs(w[k] - v[k]) <= tol * speed if wall[k] == 0 else wall[k] * (w[k] - v[k]) >= -tol * speed
+                for k in range(2))
+            value = float(wall @ w)
+            if fits and value > best_value:
+                best, best_value = a, value
+    return best
 
 
 def speed_limited(pose: np.ndarray, dt: float, scene: dict[str, Any] | None) -> np.ndarray:
