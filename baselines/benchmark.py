@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import softenv
+from softenv._artifact import atomic_write_all
 from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.config import make_config
 from softenv.envs.world import World
@@ -310,9 +311,9 @@ def provenance(command: str) -> dict[str, Any]:
 def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, command: str, elapsed: float,
                   timings: dict[str, float], curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
                   how: str, failed: list[Any], stem: str = "benchmark") -> None:
-    out_dir.mkdir(parents=True, exist_ok=True)
     prov = {**provenance(command), "executor": how}
-    with open(out_dir / f"{stem}.csv", "w", newline="") as fh:
+
+    def write_csv(fh: Any) -> None:
         fh.write(f"# made by: {command} at {prov['code']} ({prov['date']}; softenv {prov['softenv']}, "
                  f"sb3 {prov['stable_baselines3']})\n")
         writer = csv.writer(fh)
@@ -322,9 +323,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
         for s in summaries:       # clinical columns stay empty on the ideal-device scenes
             writer.writerow([s["scene"], s["policy"], s["kind"], s["seeds"], s["episodes"], f"{s['decision_us']:.1f}"] +
                             [f"{s[m][q]:.6g}" if m in s else "" for m in (*METRICS, *CLINICAL) for q in quantities])
-    (out_dir / f"{stem}.json").write_text(json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
-                                                       "failed_jobs": {r.key: r.error for r in failed}},
-                                                      indent=1, default=float))
+
+    numbers = json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
+                          "failed_jobs": {r.key: r.error for r in failed}}, indent=1, default=float)
     budgets = {a: plan.timesteps.get(a) or (_torch_ppo_budget() if a == TORCH_PPO else
                                             {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes})
                for a in plan.agents}
@@ -350,12 +351,24 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
     if failed:
         md += ["", "Failed jobs (missing from the table): " + "; ".join(f"{r.key}: {r.error}" for r in failed)]
-    (out_dir / f"{stem}.md").write_text("\n".join(md) + "\n")
-    _plots(summaries, plan, out_dir, curves, command, stem)
+    figures = _plots(summaries, plan, out_dir, curves, command, stem)
+    try:                    # the report set all or nothing: a failed write (or plot) leaves the old set whole
+        atomic_write_all([(out_dir / f"{stem}.csv", write_csv, True),
+                          (out_dir / f"{stem}.json", lambda fh: fh.write(numbers), True),
+                          (out_dir / f"{stem}.md", lambda fh: fh.write("\n".join(md) + "\n"), True),
+                          *[(path, lambda fh, fig=fig: fig.savefig(fh, format="png", dpi=120), False)
+                            for path, fig in figures]])
+    finally:
+        import matplotlib.pyplot as plt                     # the viz extra (loaded by _plots)
+
+        for _, fig in figures:
+            plt.close(fig)
 
 
 def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
-           curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str, stem: str) -> None:
+           curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str,
+           stem: str) -> list[tuple[Path, Any]]:
+    """The report's figures, drawn, with the paths they are saved to (by the caller, with the tables)."""
     import matplotlib                                       # the viz extra
 
     matplotlib.use("Agg")
@@ -385,10 +398,9 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
                frameon=False)
     fig.tight_layout(rect=(0, 0.04 + 0.025 * (len(handles) // 6 + 1), 1, 0.97))
     fig.suptitle(f"error against decision time (mean, 95 % interval) -- {command}", fontsize=7)
-    fig.savefig(out_dir / _error_plot_name(stem), dpi=120)
-    plt.close(fig)
-    _learning_curves(plan, curves, out_dir / f"{stem}_learning_curves.png", command, plt)
-    _gallery(out_dir / f"{stem}_gallery.png", command, plt)
+    return [(out_dir / _error_plot_name(stem), fig),
+            (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
+            (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
 
 
 def _grid(plt: Any, panels: int, legend_room: float = 0.0) -> tuple[Any, np.ndarray]:
@@ -405,8 +417,8 @@ def _error_plot_name(stem: str) -> str:
     return "policy_error_vs_runtime.png" if stem == "benchmark" else f"{stem}_error_vs_runtime.png"
 
 
-def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], path: Path,
-                     command: str, plt: Any) -> None:
+def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
+                     command: str, plt: Any) -> Any:
     fig, axes = _grid(plt, len(plan.scenes))
     for ax, scene in zip(axes.flat, plan.scenes):
         for algo in plan.agents:
@@ -428,11 +440,10 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
             ax.text(0.5, 0.5, "no agents in this run", ha="center", transform=ax.transAxes)
     fig.suptitle(f"learning curves (mean, 95 % band over seeds) -- {command}", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig
 
 
-def _gallery(path: Path, command: str, plt: Any) -> None:
+def _gallery(command: str, plt: Any) -> Any:
     """Final shapes against targets on one test episode of SoftSphere-v0, for a few baselines."""
     names = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle"]
     env_id, kwargs = scene_kwargs("SoftSphere-v0")
@@ -451,5 +462,4 @@ def _gallery(path: Path, command: str, plt: Any) -> None:
         env.close()
     fig.suptitle(f"final shape (colour: displacement) and target (wireframe) -- {command}", fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig

@@ -1,4 +1,5 @@
-"""Numerical stability over the documented ranges, and a long soak; writes ``results/stability.md``.
+"""Numerical stability over the documented ranges, a long soak, and hostile input; writes
+``results/stability.md``.
 
 1. Sweep: for each case (one setting at the ends of its documented range, the rest at SoftSphere-v0's
    defaults) an episode of bang-bang and random actions in the single env. Every step's surface is
@@ -10,6 +11,10 @@
 2. Soak: 1,000,000 steps of SoftSphere-v0 and 100,000 of SoftSphereHaptic-v0, half random, half
    bang-bang actions: memory before and after (traced Python allocations and the process's resident
    size), and the same-seed episode at the start and at the end, compared bit for bit.
+3. Input classes: the hostile-input tests (``tests/test_surfaces.py`` and the cases of other test files
+   named in ``HOSTILE_TESTS``) run under hypothesis's ``long`` profile; each counts the cases it tries
+   per input class (the ``tried`` fixture of ``tests/conftest.py``), tabulated with what each class must
+   give. Any failing test fails the script.
 
     python scripts/stability.py [--soak-steps 1000000] [--haptic-soak-steps 100000]
 """
@@ -153,12 +158,99 @@ def soak(env_id: str, steps: int) -> dict[str, Any]:
             "rss_mb": (before_rss, after_rss), "same_episode": bool(np.array_equal(first, last))}
 
 
+HOSTILE_TESTS = ["tests/test_surfaces.py",
+                 "tests/test_reliability.py::test_score_reports_every_bad_file_in_one_line_naming_it",
+                 "tests/test_reliability.py::test_save_trajectory_is_atomic_and_honours_the_umask",
+                 "tests/test_haptic_env.py::test_her_compute_reward_equals_the_step_reward_with_the_incisor_term",
+                 "tests/test_devices.py::test_a_pickled_vector_env_continues_bit_for_bit"]
+# input class -> (the surfaces tried, what every case must give)
+INPUT_CLASSES = {
+    "goal reward (HER's compute_reward)": (
+        "both laryngoscope ids, single and vector env, dict observations, the blade levering on the teeth",
+        "compute_reward of a step's own goals equals its reward bit for bit, the incisor term included"),
+    "settings on every path": (
+        "every id through gym.make, make_vec (sync and vector entry point), the torch backend and the SB3 "
+        "adapter; horizons shorter and longer than the id's, max_episode_steps, pickled envs",
+        "the same episode length (task.horizon, or a shorter max_episode_steps) and the same config on every path"),
+    "logs the project writes itself": (
+        "hand logs recorded from env runs: keys held together, uniform actions, into the walls; clocks "
+        "starting at 0, 1000 s and a day",
+        "accepted; the replay's shape error equals the run's bit for bit off the walls, within 2 % where a "
+        "wall stopped a partial-speed move"),
+    "ambiguous logs": (
+        "a column twice, both schemas' columns, an unknown column, a 599 s gap, a short row",
+        "refused in one line naming the file, row and column; exit 2"),
+    "oversized logs": (
+        "1e7 s of log, an NPZ header declaring 1e11 numbers, 80 MB inflating from a few hundred kB; a valid "
+        "200,000-row CSV",
+        "refused from headers and sizes with under 32 MB traced; the valid one read in under 3x its table's memory"),
+    "damaged logs": (
+        "truncated and random NPZ, UTF-16 and binary CSV, columns of unequal length, a non-scalar "
+        "format_version, a directory", "refused in one line naming the file; exit 2"),
+    "wrong types": (
+        "seeds, options and actions (None, strings, objects, ragged, complex, bool, NaN, out of range) on the "
+        "single, vector, torch and laryngoscope envs; longdouble actions",
+        "ValueError naming the argument, the env's state bit for bit as before; rewards stay Python floats"),
+    "command lines": (
+        "compare, bench, play, data, fit and score options out of range or of unknown choices; --out an "
+        "existing file; a file name that is not UTF-8",
+        "one line naming the option, exit 2, nothing written"),
+    "all-or-nothing writes": (
+        "score --out whose last file fails to write; trajectories written through a failing writer",
+        "no file of the set is left, nor any temporary file"),
+    "batch pickling and copies": (
+        "the vector env with the ideal device, the probe example and the laryngoscope, mid-episode",
+        "pickle and deepcopy continue bit for bit through autoresets"),
+}
+
+
+class _Outcomes:
+    """A pytest plugin that keeps each test's outcome."""
+
+    def __init__(self) -> None:
+        self.failed: list[str] = []
+        self.passed = 0
+
+    def pytest_runtest_logreport(self, report: Any) -> None:
+        if report.failed:
+            self.failed.append(report.nodeid)
+        elif report.when == "call" and report.passed:
+            self.passed += 1
+
+
+def input_classes() -> tuple[list[str], bool]:
+    """Run the hostile-input tests under hypothesis's long profile; the table of input classes."""
+    import os
+    import sys
+
+    import pytest                                     # the dev extra: this part runs the test suite's cases
+
+    os.environ["SOFTENV_HYPOTHESIS_PROFILE"] = "long"
+    outcomes = _Outcomes()
+    t0 = time.perf_counter()
+    pytest.main(["-q", "-p", "no:cacheprovider", "--rootdir", str(ROOT), *[str(ROOT / t) for t in HOSTILE_TESTS]],
+                plugins=[outcomes])
+    tried = sys.modules["conftest"].TRIED
+    ok = not outcomes.failed
+    lines = ["", f"Input classes tried on the surfaces the device added: {outcomes.passed} tests of {len(HOSTILE_TESTS)} "
+             f"files (`{'`, `'.join(HOSTILE_TESTS)}`) under hypothesis's long profile (1,000 examples a property) "
+             f"in {time.perf_counter() - t0:.0f} s; each case counted once where it was tried.\n",
+             "| input class | surfaces and cases | cases | what each must give | outcome |", "|---|---|---|---|---|"]
+    for name, (surfaces, rule) in INPUT_CLASSES.items():
+        outcome = "as documented" if ok and tried[name] else "**failed**" if not ok else "**not tried**"
+        ok &= tried[name] > 0
+        lines.append(f"| {name} | {surfaces} | {tried[name]:,} | {rule} | {outcome} |")
+    if outcomes.failed:
+        lines.append(f"\nFailed: {', '.join(outcomes.failed)}")
+    return lines, ok
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--soak-steps", type=int, default=1_000_000)
     parser.add_argument("--haptic-soak-steps", type=int, default=100_000)
     args = parser.parse_args()
-    lines = ["# Stability over the documented ranges, and a soak\n",
+    lines = ["# Stability over the documented ranges, a soak, and hostile input\n",
              f"Made by `python scripts/stability.py --soak-steps {args.soak_steps} --haptic-soak-steps "
              f"{args.haptic_soak_steps}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
              f"{STEPS} steps alternating uniform random and bang-bang actions; error = largest float32 decode error "
@@ -183,9 +275,12 @@ def main() -> None:
         lines.append(f"| {env_id} | {r['steps']:,} | {r['seconds']:.0f} | {kb[0]:.0f}, {kb[4]:.0f}, {kb[-1]:.0f} | "
                      f"{r['rss_mb'][0]:.0f} / {r['rss_mb'][1]:.0f} | {'bitwise equal' if r['same_episode'] else '**differs**'} |")
         print(lines[-1], flush=True)
+    table, hostile_ok = input_classes()
+    lines += table
     (ROOT / "results" / "stability.md").write_text("\n".join(lines) + "\n")
-    if not healthy:
-        raise SystemExit("some case was not finite, valid or reproducible: see results/stability.md")
+    if not healthy or not hostile_ok:
+        raise SystemExit("some case was not finite, valid, reproducible or refused as documented: see "
+                         "results/stability.md")
 
 
 if __name__ == "__main__":

@@ -36,22 +36,44 @@ def save_artifact(path: str | os.PathLike, kind: str, version: int,
     return atomic_write(path, lambda handle: np.savez(handle, **payload))  # type: ignore[arg-type]  # (stub: **kwds)
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], Any], text: bool = False) -> Path:
+Writer = Callable[[IO[Any]], Any]
+
+
+def atomic_write(path: str | os.PathLike, write: Writer, text: bool = False) -> Path:
     """Write a file through ``write(handle)`` into a temporary file beside ``path``, then rename it over
     ``path``: a failed write leaves the old file (or none), never a short one. The file gets the mode
     ``open()`` would give it (0666 less the umask), not ``mkstemp``'s 0600."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    return atomic_write_all([(Path(path), write, text)])[0]
+
+
+def atomic_write_all(files: list[tuple[Path, Writer, bool]]) -> list[Path]:
+    """Write a set of files (path, ``write(handle)``, text) all or nothing: each into a temporary file
+    beside it, then, once every write has succeeded, each renamed into place; a failed write removes the
+    temporary files and leaves every path as it was."""
+    written: list[tuple[str, Path]] = []
     try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with (os.fdopen(fd, "w", newline="") if text else os.fdopen(fd, "wb")) as handle:
-            write(handle)
-        os.replace(tmp, path)
+        for path, write, text in files:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+            written.append((tmp, path))
+            os.fchmod(fd, 0o666 & ~_umask())
+            with (os.fdopen(fd, "w", newline="") if text else os.fdopen(fd, "wb")) as handle:
+                write(handle)
+        for tmp, path in written:
+            os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp, _ in written:
+            Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+    return [path for _, path in written]
+
+
+def check_out_dir(path: str | os.PathLike, name: str = "out") -> Path:
+    """An output directory: absent (made when written) or a directory, never an existing file."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{name} {str(out)!r} exists and is not a directory; give a directory (made if absent)")
+    return out
 
 
 def _umask() -> int:

@@ -11,18 +11,44 @@ import importlib.util
 import sys
 import time
 from pathlib import Path
+from typing import Any, Callable, NoReturn
 
 import numpy as np
 
 from baselines import benchmark
+from baselines.benchmark import AGENTS
+from baselines.evaluate import SCENES
+from baselines.policies import BASELINES
 
 from . import bench
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
 from .parallel import Job, run_jobs, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
 from .shape_model import ShapeModel
+from ._artifact import check_out_dir
+from ._validation import check_int, check_real
 from .training import play
+from .training.logs import MAX_DURATION_S
 from .training.scoring import score_file
+
+
+def _bounded(kind: type, low: float, high: float | None = None, *, low_open: bool = False) -> Callable[[str], Any]:
+    """An argparse type: a number of ``kind`` in ``[low, high]`` (``(low, high]`` with ``low_open``); a bad
+    value ends the command before any work with argparse's one line (the option, the value, the range)
+    and exit status 2."""
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+        try:
+            if kind is int:
+                return check_int(value, "value", int(low), None if high is None else int(high))
+            return check_real(value, "value", low, high, low_open=low_open)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).replace("value=", "", 1).replace("value ", "", 1)) from None
+    parse.__name__ = kind.__name__             # argparse names the type in its messages
+    return parse
 
 
 def _component_rule(text: str) -> int | float | str:
@@ -106,6 +132,9 @@ def fit_response(args: argparse.Namespace, data: ForceShapeData, shape_model: Sh
 
 
 def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
+    if args.device == "cuda" and not bench.cuda_available():
+        raise ValueError("--device cuda: no CUDA device is usable here (a CPU build of torch, or no GPU); "
+                         "use --device cpu")
     if not bench.threads_pinned():
         bench.reexec_single_threaded(argv)
     bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv), device=args.device)
@@ -125,7 +154,7 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
         plan.baselines = args.policies
     if args.agents is not None:
         plan.agents = args.agents
-    if args.episodes:
+    if args.episodes is not None:
         plan.episodes = args.episodes
     if args.quick:
         print(f"softenv compare --quick: {' and '.join(plan.scenes)} test targets, {plan.episodes} episodes per policy; "
@@ -155,38 +184,63 @@ def cmd_score(args: argparse.Namespace) -> None:
 def cmd_play(args: argparse.Namespace) -> None:
     if importlib.util.find_spec("pygame") is None:
         raise ValueError("softenv play needs pygame (pip install 'softenv[play]')")
+    check_out_dir(args.out, "--out")                 # before the session: a refusal after it would lose it
     if args.headless:
         play.headless()
     play.run(args.seconds, args.out)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, with a refused option reported in one line (no usage block): ``softenv <cmd>: error: ...``."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, printable(f"{self.prog}: error: {message}\n"))
+
+
+def printable(text: str) -> str:
+    """``text`` with the bytes of file names that are not UTF-8 (surrogates, as Python reads them from the
+    command line) shown as ``\\xff`` escapes, so that printing it never fails."""
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:                        # lone surrogates of another origin
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
+    parser = OneLineParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def paper_args(p: argparse.ArgumentParser, many: bool) -> None:
         if many:
-            p.add_argument("--points", type=int, nargs="+", default=[441, 961], help="surface points (square numbers)")
-            p.add_argument("--laws", nargs="+", default=["linear", "stiffening"], choices=["linear", "stiffening"])
+            p.add_argument("--points", type=_bounded(int, 9, 40_000), nargs="+", default=[441, 961],
+                           help="surface points per data set (square numbers, 9-40000; default: 441 961)")
+            p.add_argument("--laws", nargs="+", default=["linear", "stiffening"], choices=["linear", "stiffening"],
+                           help="tissue laws, one data set each: linear, stiffening (default: both)")
         else:
-            p.add_argument("--points", type=int, default=961, help="surface points (441 or 961 in the paper)")
+            p.add_argument("--points", type=_bounded(int, 9, 40_000), default=961,
+                           help="surface points (441 or 961 in the paper; 9-40000)")
             p.add_argument("--law", default="linear", choices=["linear", "stiffening"])
-        p.add_argument("--deformations", type=int, default=10, help="contact points (paper: up to 10)")
-        p.add_argument("--magnitudes", type=int, default=11, help="force magnitudes per contact point (paper: 11)")
-        p.add_argument("--noise", type=float, default=1e-5, help="white-noise std as a fraction of the radius")
-        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--deformations", type=_bounded(int, 1, 1000), default=10,
+                       help="contact points (paper: up to 10; 1-1000)")
+        p.add_argument("--magnitudes", type=_bounded(int, 2, 1000), default=11,
+                       help="force magnitudes per contact point (paper: 11; 2-1000)")
+        p.add_argument("--noise", type=_bounded(float, 0.0, 1.0), default=1e-5,
+                       help="white-noise std as a fraction of the radius (0-1)")
+        p.add_argument("--seed", type=_bounded(int, 0, 2**32 - 1), default=0, help="random seed of the noise (default 0)")
 
     p = sub.add_parser("data", help="generate the paper's data sets (cached; --out writes copies)")
     paper_args(p, many=True)
     p.add_argument("--out", help="directory for .npz copies")
-    p.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1: in this process)")
+    p.add_argument("--jobs", type=_bounded(int, 1, 4096), default=1,
+                   help="local worker processes (default 1: in this process)")
 
     p = sub.add_parser("fit", help="fit a PCA shape model and report k, the rules' picks and the error")
     paper_args(p, many=False)
     p.add_argument("--data", help="a data set .npz written by 'softenv data --out' (instead of the paper set)")
     p.add_argument("--components", type=_component_rule, default="scree",
                    help="scree | kneedle | noise | variance fraction (0.99) | int")
-    p.add_argument("--noise-std", type=float, help="noise std in metres for the noise rule (default: the data's)")
+    p.add_argument("--noise-std", type=_bounded(float, 0.0, None, low_open=True),
+                   help="noise std in metres for the noise rule (> 0; default: the data's)")
     p.add_argument("--out", help="write the shape model to this .npz")
     p.add_argument("--response", choices=list(REGRESSORS), help="also fit this force -> b regressor and report its test error")
     p.add_argument("--split", choices=["rows", "contacts"], default="rows",
@@ -196,44 +250,56 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="speed and memory benchmarks against CartPole-v1 (writes perf.md/.json)")
     p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")
     p.add_argument("--out", default="results", help="output directory (default: results)")
-    p.add_argument("--only", nargs="+", help="run only these sections")
+    p.add_argument("--only", nargs="+", choices=list(bench.SECTIONS), metavar="SECTION",
+                   help=f"run only these sections: {', '.join(bench.SECTIONS)} (default: all but gpu)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
                    help="cuda: the torch twin on the GPU alone, written to perf-gpu.md (needs a CUDA device)")
 
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
     p.add_argument("--quick", action="store_true",
                    help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
-    p.add_argument("--scenes", nargs="+", help="benchmark scenes (default: all in full mode)")
-    p.add_argument("--policies", nargs="*", help="baseline policies (default: all)")
-    p.add_argument("--agents", nargs="*", help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
+    p.add_argument("--scenes", nargs="+", choices=list(SCENES), metavar="SCENE",
+                   help=f"benchmark scenes: {', '.join(SCENES)} (default: all in full mode)")
+    p.add_argument("--policies", nargs="*", choices=list(BASELINES), metavar="POLICY",
+                   help=f"baseline policies: {', '.join(BASELINES)} (default: all; none: no baselines)")
+    p.add_argument("--agents", nargs="*", choices=list(AGENTS), metavar="AGENT",
+                   help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
                    "present; ideal-device scenes) (default: quick and full: the four SB3 agents)")
-    p.add_argument("--episodes", type=int, help="test episodes per policy and scene (default 100)")
+    p.add_argument("--episodes", type=_bounded(int, 1, 100_000),
+                   help="test episodes per policy and scene (1-100000; default 100)")
     p.add_argument("--out", default="results", help="report directory (default: results)")
     p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
-    p.add_argument("--jobs", type=int, default=None,
+    p.add_argument("--jobs", type=_bounded(int, 1, 4096), default=None,
                    help="worker processes (local) or CPUs of a new local Ray instance (default: every usable core; "
                         "1: in this process); results do not depend on it")
     p.add_argument("--executor", choices=["local", "ray"], default="local",
                    help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
-    p.add_argument("--retries", type=int, default=1, help="re-runs of a failed job before it is reported (default 1)")
+    p.add_argument("--retries", type=_bounded(int, 0, 100), default=1,
+                   help="re-runs of a failed job before it is reported (0-100; default 1)")
 
     p = sub.add_parser("play", help="drive the laryngoscope yourself (keyboard, mouse, gamepad); scored at the end")
-    p.add_argument("--seconds", type=float, default=10.0, help="session length (default 10 s)")
+    p.add_argument("--seconds", type=_bounded(float, 0.0, MAX_DURATION_S, low_open=True), default=10.0,
+                   help=f"session length in s (0-{MAX_DURATION_S:g}, the longest log that can be scored; default 10)")
     p.add_argument("--out", default="play", help="where the device log and its score report go (default: play)")
     p.add_argument("--headless", action="store_true", help="no window (SDL's dummy driver): for a smoke run")
 
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "
                                       "force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
-    p.add_argument("--scene", choices=["quasi_static", "viscoelastic"], default="quasi_static")
-    p.add_argument("--law", choices=["linear", "stiffening"], default="linear")
+    p.add_argument("--scene", choices=["quasi_static", "viscoelastic"], default="quasi_static",
+                   help="tissue dynamics of the replay: quasi_static (default) or viscoelastic")
+    p.add_argument("--law", choices=["linear", "stiffening"], default="linear",
+                   help="tissue law of the replay: linear (default) or stiffening")
     p.add_argument("--out", help="write <name>_score.json, .md and .png here")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)      # every option checked here, before any work
+    except SystemExit as exc:                         # argparse's one line (or --help) has been printed
+        return int(exc.code or 0)
     try:
         if args.command == "data":
             cmd_data(args)
@@ -248,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "play":
             cmd_play(args)
     except (ValueError, OSError) as exc:        # bad arguments, files, or a file system that refuses
-        print(f"softenv {args.command}: error: {exc}", file=sys.stderr)
+        print(printable(f"softenv {args.command}: error: {exc}"), file=sys.stderr)
         return 2
     return 0
 

@@ -1,5 +1,6 @@
 """Test set-up: one BLAS/torch thread (2-core CI machines) and an isolated cache directory."""
 
+import collections
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS"):
@@ -29,6 +30,16 @@ try:  # torch is an optional extra; when present, keep it to one thread as well
     torch.set_num_threads(1)
 except ImportError:  # pragma: no cover
     pass
+
+
+# cases tried per input class (scripts/stability.py runs the hostile-input tests and tabulates these)
+TRIED: "collections.Counter[str]" = collections.Counter()
+
+
+@pytest.fixture(scope="session")
+def tried() -> "collections.Counter[str]":
+    """Count a case of an input class: ``tried["class"] += 1``."""
+    return TRIED
 
 
 @pytest.fixture(scope="session")

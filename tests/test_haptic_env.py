@@ -273,7 +273,7 @@ def test_sb3_adapter_gives_the_clinical_metrics_when_asked():
 
 
 @pytest.mark.parametrize("env_id", IDS)
-def test_her_compute_reward_equals_the_step_reward_with_the_incisor_term(env_id):
+def test_her_compute_reward_equals_the_step_reward_with_the_incisor_term(env_id, tried):
     """HER relabels with compute_reward: for the step's own goals it must give the step's reward bit for bit,
     the incisor term included (a blade levering on the teeth is punished in relabelled transitions too)."""
     env = gym.make(env_id, obs_mode="dict", reward={"force_weight": 0.5, "smoothness_weight": 0.1}).unwrapped
@@ -288,6 +288,7 @@ def test_her_compute_reward_equals_the_step_reward_with_the_incisor_term(env_id)
         vobs, vreward, _, _, vinfo = venv.step(np.stack([action, PRESS]))
         assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
         assert np.array_equal(venv.compute_reward(vobs["achieved_goal"], vobs["desired_goal"], vinfo), vreward)
+        tried["goal reward (HER's compute_reward)"] += 3          # the single env's step, the vector env's two
         rewards.append(reward)
         infos.append(info)
         relabelled.append(obs)

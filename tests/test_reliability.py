@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import tracemalloc
 import zipfile
 
 import gymnasium as gym
@@ -167,11 +168,20 @@ def _bad_files(tmp_path):
             "directory": (directory, "is not a file")}
 
 
-def test_score_reports_every_bad_file_in_one_line_naming_it(tmp_path, capsys):
+OVERSIZED = ("1e7 s", "1e11 elements", "zip bomb")
+AMBIGUOUS = ("column twice", "both schemas", "unknown column", "599 s gap", "short row")
+
+
+def test_score_reports_every_bad_file_in_one_line_naming_it(tmp_path, capsys, tried):
     import re
 
     for case, (path, message) in _bad_files(tmp_path).items():
+        tried["oversized logs" if case in OVERSIZED else "ambiguous logs" if case in AMBIGUOUS else "damaged logs"] += 1
+        tracemalloc.start()
         code, err = _score(capsys, str(path))
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert peak < 32 << 20, (case, peak)              # sizes are refused from headers, before allocating
         assert code == 2, case
         assert err.count("\n") == 1 and "Traceback" not in err, (case, err)
         assert str(path) in err and re.search(message, err), (case, err)
@@ -201,11 +211,13 @@ def test_replay_and_expert_trajectory_validate_their_arguments():
             expert_trajectory(duration_s=duration)
 
 
-def test_save_trajectory_is_atomic_and_honours_the_umask(tmp_path, monkeypatch):
+def test_save_trajectory_is_atomic_and_honours_the_umask(tmp_path, monkeypatch, tried):
     import csv as csv_module
     import os
 
     from softenv.training.scoring import load_trajectory, save_trajectory, expert_trajectory
+
+    tried["all-or-nothing writes"] += 1
 
     path = tmp_path / "t.csv"
     table = expert_trajectory(duration_s=1.0)

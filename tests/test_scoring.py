@@ -104,7 +104,7 @@ def test_compare_command_rejects_unknown_names(capsys):
     from softenv.cli import main
 
     assert main(["compare", "--quick", "--policies", "telepathy", "--agents", "--out", "/nonexistent"]) == 2
-    assert "valid baselines" in capsys.readouterr().err
+    assert "argument --policies: invalid choice: 'telepathy' (choose from 'zero'" in capsys.readouterr().err
 
 
 # -- hand-pose (device) logs -------------------------------------------------------------------

@@ -10,7 +10,7 @@ import pickle
 import gymnasium as gym
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import softenv  # noqa: F401
@@ -54,11 +54,10 @@ def _episode_length(path: str, env_id: str, limit: int | None, **scene) -> tuple
     raise AssertionError("no episode ended")
 
 
-@settings(max_examples=30)
 @given(env_id=st.sampled_from(IDS), horizon=st.integers(1, 12) | st.sampled_from([101, 251]),
        limit=st.none() | st.integers(1, 12), tolerance=st.floats(0.01, 0.99), force_weight=st.floats(0.0, 2.0))
 def test_every_path_honours_the_horizon_the_limit_and_every_setting_alike(env_id, horizon, limit, tolerance,
-                                                                          force_weight):
+                                                                          force_weight, tried):
     """A horizon longer or shorter than the id's, and a max_episode_steps, end episodes at the same step
     on every way in (gym.make, gym.make_vec sync and vector entry point, the torch backend, the SB3
     adapter), which all build the same config."""
@@ -67,6 +66,7 @@ def test_every_path_honours_the_horizon_the_limit_and_every_setting_alike(env_id
     scene = {"task": {"horizon": horizon, "tolerance": tolerance}, "reward": {"force_weight": force_weight}}
     paths = [p for p in PATHS if p != "torch" or env_id in ENV_SCENES]        # the torch backend: the ideal device
     results = {path: _episode_length(path, env_id, limit, **copy.deepcopy(scene)) for path in paths}
+    tried["settings on every path"] += len(paths)
     expected = horizon if limit is None else min(horizon, limit)
     assert {path: length for path, (length, _) in results.items()} == {path: expected for path in paths}
     configs = [config for _, config in results.values()]
@@ -74,9 +74,10 @@ def test_every_path_honours_the_horizon_the_limit_and_every_setting_alike(env_id
     assert configs[0]["task"]["horizon"] == horizon and configs[0]["task"]["tolerance"] == tolerance
 
 
-def test_a_time_limit_ends_a_laryngoscope_episode_without_its_clinical_record_on_every_path():
+def test_a_time_limit_ends_a_laryngoscope_episode_without_its_clinical_record_on_every_path(tried):
     """max_episode_steps is a time limit from outside (TimeLimit on the single env), so the episode's
     clinical record, which the task writes at its own end, is absent alike through sync and vector."""
+    tried["settings on every path"] += 2
     kwargs = {"max_episode_steps": 3, "task": {"horizon": 5}}
     native = gym.make_vec("SoftSphereHaptic-v0", num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
     sync = gym.make_vec("SoftSphereHaptic-v0", num_envs=2, vectorization_mode="sync", **kwargs)
@@ -91,7 +92,8 @@ def test_a_time_limit_ends_a_laryngoscope_episode_without_its_clinical_record_on
     assert "clinical" in info
 
 
-def test_pickled_envs_keep_their_time_limit():
+def test_pickled_envs_keep_their_time_limit(tried):
+    tried["settings on every path"] += 2
     venv = gym.make_vec("SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", max_episode_steps=4)
     again = pickle.loads(pickle.dumps(venv))
     assert again.max_episode_steps == 4
@@ -124,15 +126,15 @@ keys = st.lists(st.lists(st.sampled_from([-1.0, 0.0, 1.0]), min_size=4, max_size
 uniform = st.lists(st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4), min_size=2, max_size=60)
 
 
-@settings(max_examples=25)
 @given(actions=keys | uniform, offset=st.sampled_from([0.0, 1000.0, 86_400.0]))
-def test_every_log_recorded_from_an_env_run_is_accepted_and_replays_to_its_shape_error(actions, offset):
+def test_every_log_recorded_from_an_env_run_is_accepted_and_replays_to_its_shape_error(actions, offset, tried):
     """Full-speed moves (keys held together, walls met) are within the device's limits, a clock that
     starts anywhere is fine, and the replay gives the recorded shape error at every step: exactly off the
     walls, within 2 % where a wall stopped the hand within a period (the poses do not say when)."""
     from softenv.training.scoring import replay_hand
 
     log, errors, walls = _recorded(np.array(actions), offset)
+    tried["logs the project writes itself"] += 1
     replayed = replay_hand(log).error_mm
     if walls:
         np.testing.assert_allclose(replayed, errors, rtol=0.02)
@@ -140,8 +142,9 @@ def test_every_log_recorded_from_an_env_run_is_accepted_and_replays_to_its_shape
         np.testing.assert_allclose(replayed, errors, rtol=1e-9)
 
 
-def test_keys_held_together_into_a_wall_replay_bit_for_bit():
+def test_keys_held_together_into_a_wall_replay_bit_for_bit(tried):
     """The session a keyboard makes: full-speed moves, two keys at once, into the walls."""
+    tried["logs the project writes itself"] += 1
     from softenv.training.scoring import replay_hand
 
     actions = np.array([[1, 0, 0, 0]] * 5 + [[1, 1, 0, 0]] * 10 + [[0, 1, 1, 0]] * 10 + [[0, 0, 1, 1]] * 10
@@ -180,9 +183,9 @@ def _after(env, name: str):
     return np.asarray(out.cpu() if hasattr(out, "cpu") else out)
 
 
-@settings(max_examples=40)
 @given(name=st.sampled_from(list(ENVS)), what=st.sampled_from(["seed", "options", "action"]), data=st.data())
-def test_wrong_types_are_refused_by_name_and_change_nothing(name, what, data):
+def test_wrong_types_are_refused_by_name_and_change_nothing(name, what, data, tried):
+    tried["wrong types"] += 1
     env = ENVS[name]
     env.reset(seed=5)
     single = name in ("single", "haptic")
@@ -193,15 +196,15 @@ def test_wrong_types_are_refused_by_name_and_change_nothing(name, what, data):
         elif what == "options":
             env.reset(options=data.draw(bad_options))
         else:
-            bad = data.draw(bad_actions)
-            env.step(bad[0] if single and isinstance(bad, np.ndarray) else bad)
+            env.step(data.draw(bad_actions))                  # (2, 4) arrays have the wrong shape for a single env
     assert {"seed": "seed", "options": "options", "action": "action"}[what] in str(refused.value)
     after = _after(env, name)
     env.reset(seed=5)
     assert np.array_equal(_after(env, name), after)
 
 
-def test_actions_of_any_real_dtype_leave_python_floats_in_the_state_and_the_reward():
+def test_actions_of_any_real_dtype_leave_python_floats_in_the_state_and_the_reward(tried):
+    tried["wrong types"] += 2
     env = gym.make("SoftSphereHaptic-v0", **SMALL).unwrapped
     env.reset(seed=0)
     _, reward, *_ = env.step(np.full(4, 0.5, np.longdouble))
@@ -209,3 +212,153 @@ def test_actions_of_any_real_dtype_leave_python_floats_in_the_state_and_the_rewa
     venv = ENVS["vector"]
     venv.reset(seed=0)
     assert venv.step(np.zeros((2, 4), np.longdouble))[1].dtype == np.float64
+
+
+# -- command lines: every option checked before any work, one line, exit 2, nothing written -------------
+
+BAD_COMMANDS = [
+    ("compare --episodes 0", "argument --episodes: 0 is out of range; allowed range [1, 100000]"),
+    ("compare --episodes -5", "argument --episodes: -5 is out of range"),
+    ("compare --jobs 0", "argument --jobs: 0 is out of range"),
+    ("compare --retries -1", "argument --retries: -1 is out of range"),
+    ("compare --scenes Nope-v0", "argument --scenes: invalid choice: 'Nope-v0'"),
+    ("compare --agents dqn", "argument --agents: invalid choice: 'dqn'"),
+    ("bench --only envs", "argument --only: invalid choice: 'envs'"),
+    ("play --seconds nan", "argument --seconds: must be finite, got nan; allowed range (0, 600]"),
+    ("play --seconds inf", "argument --seconds: must be finite"),
+    ("play --seconds 0", "argument --seconds: 0 is out of range; allowed range (0, 600]"),
+    ("play --seconds -1", "argument --seconds: -1 is out of range"),
+    ("play --seconds 1e9", "argument --seconds: 1e+09 is out of range"),
+    ("play --seconds 601", "argument --seconds: 601 is out of range"),
+    ("play --headless --seconds 1 --out taken", "--out 'taken' exists and is not a directory"),
+    ("data --points 3", "argument --points: 3 is out of range; allowed range [9, 40000]"),
+    ("data --seed 1.5", "argument --seed: '1.5' is not an integer"),
+    ("fit --noise-std -1", "argument --noise-std: -1 is out of range"),
+    ("score missing.csv --out taken", "out directory 'taken' exists and is not a directory"),
+]
+if not __import__("softenv.bench", fromlist=["cuda_available"]).cuda_available():
+    BAD_COMMANDS.append(("bench --device cuda", "--device cuda: no CUDA device is usable here"))
+
+
+@pytest.mark.parametrize("command,message", BAD_COMMANDS, ids=[c for c, _ in BAD_COMMANDS])
+def test_bad_options_are_refused_in_one_line_before_any_work(command, message, tmp_path, monkeypatch, capsys, tried):
+    tried["command lines"] += 1
+    from softenv.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "taken").write_text("a file, not a directory")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(command.split()) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before            # nothing written
+
+
+def test_a_file_name_that_is_not_utf8_is_shown_escaped(tmp_path, capsys, tried):
+    tried["command lines"] += 1
+    from softenv.cli import main
+
+    name = str(tmp_path) + "/" + b"\xff\xfe.csv".decode("utf-8", "surrogateescape")
+    assert main(["score", name]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "does not exist" in err
+
+
+def test_a_score_report_is_written_all_or_nothing(tmp_path, monkeypatch, tried):
+    """A failed write of the report's last file (the PNG) leaves none of the three, and no temporary file."""
+    tried["all-or-nothing writes"] += 1
+    from softenv.training import scoring
+
+    log = tmp_path / "expert.csv"
+    scoring.save_trajectory(scoring.expert_trajectory(duration_s=1.0), log)
+
+    def failing(*args, **kwargs):
+        def write(fh):
+            raise OSError("disk full")
+        return write
+
+    monkeypatch.setattr(scoring, "_plot", failing)
+    with pytest.raises(OSError, match="disk full"):
+        scoring.score_file(log, out_dir=tmp_path / "report")
+    assert not (tmp_path / "report").exists() or list((tmp_path / "report").iterdir()) == []
+    monkeypatch.undo()
+    scoring.score_file(log, out_dir=tmp_path / "report")
+    assert sorted(p.name for p in (tmp_path / "report").iterdir()) == ["expert_score.json", "expert_score.md",
+                                                                         "expert_score.png"]
+
+
+def test_a_long_valid_log_is_read_in_bounded_memory(tmp_path, tried):
+    """A CSV is parsed row by row into one float table: the memory it takes is that of the table (here
+    200,000 rows, 8 MB), not of the text's rows as Python lists (about ten times more)."""
+    import tracemalloc
+
+    from softenv.training.logs import read_log
+
+    tried["oversized logs"] += 1
+    rows = 200_000
+    t = np.arange(rows) * 1e-3
+    table = np.column_stack([t, np.full(rows, 90.0), np.zeros(rows), np.full(rows, 10.0), np.zeros(rows)])
+    path = tmp_path / "long.csv"
+    np.savetxt(path, table, delimiter=",", header="time_s,insertion_deg,lateral_deg,normal_N,sideways_N", comments="")
+    tracemalloc.start()
+    _, read = read_log(path)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert np.array_equal(read, table) and peak < 3 * table.nbytes, peak
+
+
+def test_a_benchmark_report_is_written_all_or_nothing(tmp_path, monkeypatch, tried):
+    """softenv compare's report set (tables and figures): a failing figure leaves no file, not even the tables."""
+    from baselines import benchmark
+
+    tried["all-or-nothing writes"] += 1
+    plan = benchmark.Plan(["SoftSphere-v0"], ["zero"], [], {"SoftSphere-v0": 1}, episodes=2)
+    drawn = benchmark._gallery
+
+    def broken_gallery(*args):
+        fig = drawn(*args)
+        monkeypatch.setattr(fig, "savefig", lambda *a, **k: (_ for _ in ()).throw(OSError("disk full")))
+        return fig
+
+    monkeypatch.setattr(benchmark, "_gallery", broken_gallery)
+    with pytest.raises(OSError, match="disk full"):
+        benchmark.run(plan, tmp_path / "report", tmp_path / "runs", "test", echo=lambda s: None)
+    assert not (tmp_path / "report").exists() or list((tmp_path / "report").iterdir()) == []
+    monkeypatch.undo()
+    benchmark.run(plan, tmp_path / "report", tmp_path / "runs", "test", echo=lambda s: None)
+    assert len(list((tmp_path / "report").iterdir())) == 6
+
+
+def _training_calls():
+    from softenv.haptics import HapticLoop
+    from softenv.training import scoring, trainee
+
+    log = trainee.expert_hand_log(duration_s=1.0)
+    nan, back = log.copy(), log.copy()
+    nan[3, 1] = np.nan
+    back[5, 0] = back[2, 0]
+    loop = HapticLoop()
+    loop.reset()
+    return {
+        "score_hand_log(scene=5)": (lambda: scoring.score_hand_log(log, scene=5), "scene=5 must be a dict"),
+        "score_hand_log(scene={'tisue': ...})": (lambda: scoring.score_hand_log(log, scene={"tisue": {}}), "'tisue'"),
+        "degrade(NaN)": (lambda: trainee.degrade(nan, tremor=0.1), "row 4, column 'hand_x_m' = nan is not finite"),
+        "degrade(times back)": (lambda: trainee.degrade(back), "row 6, column 'time_s'"),
+        "degrade(seed=1.5)": (lambda: trainee.degrade(log, seed=1.5), "seed must be an integer"),
+        "replay_hand(ragged)": (lambda: scoring.replay_hand([[0, 0, 0, 0, 0], [1, 0, 0]]), "must be a table"),
+        "tick(numeric strings)": (lambda: loop.tick(["0.1", "0", "0", "0"]), "hand_pose must be a real numeric"),
+        "tick(None)": (lambda: loop.tick(None), "hand_pose must be a real numeric"),
+        "tick(NaN)": (lambda: loop.tick([np.nan, 0.0, 0.0, 0.0]), "hand_pose must be 4 finite numbers"),
+    }
+
+
+TRAINING_CALLS = _training_calls()
+
+
+@pytest.mark.parametrize("call", list(TRAINING_CALLS))
+def test_training_functions_refuse_wrong_types_by_name(call, tried):
+    tried["wrong types"] += 1
+    run, message = TRAINING_CALLS[call]
+    with pytest.raises(ValueError) as refused:
+        run()
+    assert message in str(refused.value), str(refused.value)

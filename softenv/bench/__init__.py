@@ -4,6 +4,7 @@ next to Gymnasium's CartPole-v1 measured in the same process. Writes ``perf.md``
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import json
 import os
 import sys
@@ -11,6 +12,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from .._artifact import atomic_write_all
 from ..parallel import THREAD_VARS
 from .timing import Row, blas_advice, cartpole_steps_per_second, code_revision, machine_info
 
@@ -36,6 +38,15 @@ def single_thread_environment() -> dict[str, str]:
     env = dict(os.environ)
     env.update({v: "1" for v in THREAD_VARS})
     return env
+
+
+def cuda_available() -> bool:
+    """Whether torch is installed and sees a CUDA device (``--device cuda`` is refused up front otherwise)."""
+    if importlib.util.find_spec("torch") is None:
+        return False
+    import torch                              # the rl extra: only to ask for a GPU
+
+    return bool(torch.cuda.is_available())
 
 
 def threads_pinned() -> bool:
@@ -94,13 +105,14 @@ def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elap
     code = code_revision()
     payload = {"command": command, "code": code, "quick": quick, "elapsed_s": elapsed, "machine": machine,
                "blas_advice": advice, "rows": [r.as_dict() for r in rows]}
-    (out_dir / f"{stem}.json").write_text(json.dumps(payload, indent=2, default=float) + "\n")
     text = [f"# softenv performance{' (quick)' if quick else ''}", "",
             f"Made by `{command}` at {code} in {elapsed:.0f} s. Single thread (BLAS/OpenMP pinned to 1); every time is the "
             "median over repeats, with its interquartile range; CartPole-v1 was measured in the same process.", "",
             "Machine: " + ", ".join(f"{k} {v}" for k, v in machine.items()), "",
             *([f"Warning: {advice}.", ""] if advice else []), table, ""]
-    (out_dir / f"{stem}.md").write_text("\n".join(text))
+    # both files or neither: a failed write leaves the old report whole
+    atomic_write_all([(out_dir / f"{stem}.json", lambda fh: fh.write(json.dumps(payload, indent=2, default=float) + "\n"),
+                       True), (out_dir / f"{stem}.md", lambda fh: fh.write("\n".join(text)), True)])
 
 
 def command_line(argv: list[str]) -> str:

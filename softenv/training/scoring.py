@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from .. import clinical
-from .._artifact import atomic_write
+from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_real
 from ..devices.laryngoscope.physics import hand_action
 from ..envs.config import make_config, scene_sections
@@ -246,8 +246,8 @@ def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, sourc
 def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
     """Score a log file (hand poses or force commands, by its columns); with ``out_dir``, write
     ``<name>_score.json``, ``.md`` and ``.png``. Arguments and file are checked before any replay."""
-    if out_dir is not None and Path(out_dir).exists() and not Path(out_dir).is_dir():
-        raise ValueError(f"out directory {str(out_dir)!r} exists and is not a directory")
+    if out_dir is not None:
+        check_out_dir(out_dir, "out directory")
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
     if schema is HAND_LOG:
@@ -260,12 +260,13 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
         parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
     report = {"trajectory": str(path), "log": schema.name, "scene": scene_sections(scene), **parts, "weights": weights,
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
-    if out_dir is not None:
+    if out_dir is not None:                 # the three files all or nothing: a failed write leaves none of them
         out = Path(out_dir)
         stem = Path(path).stem
-        atomic_write(out / f"{stem}_score.json", lambda fh: fh.write(json.dumps(report, indent=2)), text=True)
-        atomic_write(out / f"{stem}_score.md", lambda fh: fh.write(_markdown(report)), text=True)
-        _plot(trainee, expert, out / f"{stem}_score.png", f"{stem}: score {parts['score']:.0f}/100")
+        atomic_write_all([(out / f"{stem}_score.json", lambda fh: fh.write(json.dumps(report, indent=2)), True),
+                          (out / f"{stem}_score.md", lambda fh: fh.write(_markdown(report)), True),
+                          (out / f"{stem}_score.png", _plot(trainee, expert, f"{stem}: score {parts['score']:.0f}/100"),
+                           False)])
     return report
 
 
@@ -308,7 +309,8 @@ def _markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
+def _plot(trainee: Replay, expert: Replay, title: str) -> Writer:
+    """The report's figure (shape error, tongue and incisor force against the expert) as a PNG writer."""
     import matplotlib                                       # the viz extra
 
     matplotlib.use("Agg")
@@ -325,5 +327,9 @@ def _plot(trainee: Replay, expert: Replay, path: Path, title: str) -> None:
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
-    plt.close(fig)
+
+    def write(fh: Any) -> None:
+        fig.savefig(fh, format="png", dpi=110)
+        plt.close(fig)
+
+    return write
