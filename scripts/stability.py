@@ -189,14 +189,16 @@ INPUT_CLASSES = {
         "format_version, a directory", "refused in one line naming the file; exit 2"),
     "wrong types": (
         "seeds, options and actions (None, strings, objects, ragged, complex, bool, NaN, out of range) on the "
-        "single, vector, torch and laryngoscope envs; longdouble actions",
+        "single, vector, torch and laryngoscope envs; longdouble actions; scene=5, NaN and backward times, ragged "
+        "rows and numeric strings to score_hand_log, degrade, replay_hand and HapticLoop.tick",
         "ValueError naming the argument, the env's state bit for bit as before; rewards stay Python floats"),
     "command lines": (
         "compare, bench, play, data, fit and score options out of range or of unknown choices; --out an "
         "existing file; a file name that is not UTF-8",
         "one line naming the option, exit 2, nothing written"),
     "all-or-nothing writes": (
-        "score --out whose last file fails to write; trajectories written through a failing writer",
+        "score --out and compare's report set whose last file fails to write; trajectories written through a "
+        "failing writer",
         "no file of the set is left, nor any temporary file"),
     "batch pickling and copies": (
         "the vector env with the ideal device, the probe example and the laryngoscope, mid-episode",
