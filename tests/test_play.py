@@ -57,3 +57,18 @@ def test_play_command_runs_headless_and_prints_the_score(tmp_path, capsys):
     assert main(["play", "--headless", "--seconds", "0.3", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "score" in out and "/100" in out and list(tmp_path.glob("session_*_score.json"))
+
+
+def test_a_session_with_keys_held_together_into_the_walls_replays_as_it_was_played(tmp_path):
+    """Two and four keys at once drive the hand at full speed on several axes and into its walls: the log is
+    accepted, and its replay gives the session's shape error and clinical metrics exactly."""
+    play.headless()
+    keys = [pygame.K_LEFT, pygame.K_DOWN, pygame.K_d, pygame.K_e]
+    script = {0: [_key(k, True) for k in keys[:2]], 20: [_key(k, True) for k in keys[2:]],
+              45: [_key(k, False) for k in keys]}
+    session = play.run(seconds=1.2, out_dir=tmp_path, realtime=False, script=lambda step: script.get(step, []),
+                       echo=lambda s: None)
+    metrics = session.report["metrics"]
+    assert metrics["final_error_mm"] == session.live_final_error_mm
+    for key in ("peak_tongue_force_N", "tongue_force_time_Ns", "hand_path_m", "glottic_view_pct"):
+        assert metrics["clinical"][key] == session.live_clinical[key], key
