@@ -170,7 +170,8 @@ class SoftSphereVectorEnv(VectorEnv):
         reward = reward + extra
         # the device's episode record where the task ends an episode (a shorter max_episode_steps ends it
         # from outside, without one, as TimeLimit does to the single env)
-        done = terminated | ((self._t >= w.horizon) & s)
+        ended = truncated if self.max_episode_steps == w.horizon else (self._t >= w.horizon) & s
+        done = terminated | ended
         if device.episode_info_keys and done.any():
             ended = np.flatnonzero(done)
             records = {int(i): device.episode_info(int(i), self._b[i]) for i in ended}
