@@ -5,7 +5,9 @@ its users). Profiles as in ``test_properties.py``."""
 from __future__ import annotations
 
 import copy
+import io
 import pickle
+import zipfile
 
 import gymnasium as gym
 import numpy as np
@@ -362,3 +364,112 @@ def test_training_functions_refuse_wrong_types_by_name(call, tried):
     with pytest.raises(ValueError) as refused:
         run()
     assert message in str(refused.value), str(refused.value)
+
+
+# -- property tests of the rules themselves ----------------------------------------------------------
+
+@given(actions=st.lists(st.lists(st.sampled_from([-1.0, -0.3, 0.0, 0.5, 1.0]), min_size=4, max_size=4),
+                        min_size=1, max_size=40),
+       weights=st.fixed_dictionaries({"force_weight": st.floats(0.0, 3.0), "smoothness_weight": st.floats(0.0, 3.0),
+                                      "incisor_weight": st.floats(0.0, 3.0)}))
+def test_compute_reward_of_a_steps_own_goals_is_its_reward(actions, weights, tried):
+    env = gym.make("SoftSphereHaptic-v0", obs_mode="dict", reward=weights, **SMALL).unwrapped
+    env.reset(seed=1)
+    for a in actions:
+        obs, reward, _, _, info = env.step(np.array(a))
+        tried["goal reward (HER's compute_reward)"] += 1
+        assert env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info) == reward
+
+
+FORCE_COLUMNS = ["time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N"]
+HAND_COLUMNS = ["time_s", "hand_x_m", "hand_z_m", "hand_pitch_rad", "hand_y_m"]
+
+
+@given(columns=st.lists(st.sampled_from(sorted(set(FORCE_COLUMNS + HAND_COLUMNS)) + ["button", "force_N"]),
+                        min_size=1, max_size=9))
+def test_a_log_is_read_only_with_exactly_one_schemas_columns(columns, tmp_path_factory, tried):
+    """Any header: read when it holds one schema's columns, each once, in any order; otherwise refused
+    naming the column that is twice, of the other schema, of neither, or missing."""
+    from softenv.training.logs import read_log
+
+    tried["ambiguous logs"] += 1
+    path = tmp_path_factory.mktemp("log") / "log.csv"
+    values = {"time_s": [0.0, 0.5], "insertion_deg": [90.0, 90.0], "normal_N": [10.0, 10.0]}
+    rows = [[values.get(c, [0.0, 0.0])[i] for c in columns] for i in range(2)]
+    path.write_text(",".join(columns) + "\n" + "\n".join(",".join(map(str, r)) for r in rows) + "\n")
+    exact = sorted(columns) in (sorted(FORCE_COLUMNS), sorted(HAND_COLUMNS))
+    if exact:
+        schema, table = read_log(path)
+        assert list(schema.columns) in (FORCE_COLUMNS, HAND_COLUMNS) and table.shape == (2, 5)
+        return
+    with pytest.raises(ValueError) as refused:
+        read_log(path)
+    message = str(refused.value)
+    assert "log.csv" in message and ("more than once" in message or "are not" in message or "missing" in message
+                                     or "one schema" in message), message
+
+
+@given(shape=st.lists(st.integers(0, 10**12), min_size=1, max_size=3), dtype=st.sampled_from(["<f8", "<f4", "<i8",
+                                                                                              "<c16", "<f16"]))
+def test_npz_members_are_judged_by_their_headers_before_anything_is_read(shape, dtype, tmp_path_factory, tried):
+    """A member's header may claim any shape: beyond MAX_ROWS numbers, or 1-D arrays of more than 8
+    bytes a number, it is refused from the header alone (its data here is 16 bytes)."""
+    from softenv.training.logs import MAX_ROWS, read_log
+
+    tried["oversized logs"] += 1
+    header = repr({"descr": dtype, "fortran_order": False, "shape": tuple(shape)}).encode()
+    header = header.ljust(118) + b"\n"
+    member = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + bytes(16)
+    path = tmp_path_factory.mktemp("npz") / "claims.npz"
+    with zipfile.ZipFile(path, "w") as archive:
+        buffer = io.BytesIO()
+        np.save(buffer, np.array(1))
+        archive.writestr("format_version.npy", buffer.getvalue())
+        for column in FORCE_COLUMNS:
+            archive.writestr(f"{column}.npy", member)
+    with pytest.raises(ValueError) as refused:
+        read_log(path)
+    message = str(refused.value)
+    count = int(np.prod(shape, dtype=object))
+    if count > MAX_ROWS or np.dtype(dtype).itemsize > 8:
+        assert "declares shape" in message, message
+    else:                               # a plausible header over too little data: the reader says so
+        assert "claims.npz" in message, message
+
+
+OPTION_RANGES = [("compare", "--episodes", int, 1, 100_000), ("compare", "--jobs", int, 1, 4096),
+                 ("compare", "--retries", int, 0, 100), ("play", "--seconds", float, 0.0, 600.0),
+                 ("data", "--points", int, 9, 40_000), ("data", "--noise", float, 0.0, 1.0),
+                 ("fit", "--noise-std", float, 0.0, None)]
+
+
+@given(option=st.sampled_from(OPTION_RANGES), value=st.one_of(
+    st.integers(-10**6, 10**6).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(["", "1e400", "-0", "0x10", "1_000", " 5", "five", "nan", "inf", "1.0"])))
+def test_every_numeric_option_is_accepted_exactly_within_its_range(option, value, tried):
+    """The parser's types are the whole check: a value parses iff it is a number of the option's kind
+    inside its documented range (play's seconds and fit's noise std exclude 0), else one line, exit 2."""
+    import contextlib
+
+    from softenv.cli import build_parser
+
+    command, flag, kind, low, high = option
+    tried["command lines"] += 1
+    try:
+        number = kind(value)
+    except ValueError:
+        number = None
+    fine = number is not None and np.isfinite(number) and number >= low and (high is None or number <= high) and not (
+        flag in ("--seconds", "--noise-std") and number == 0)
+    with contextlib.redirect_stderr(io.StringIO()) as err:
+        try:
+            args = build_parser().parse_args([command, flag, value] + (["x.csv"] if command == "score" else []))
+            parsed = True
+        except SystemExit as exit_:
+            parsed = False
+            assert exit_.code == 2
+    assert parsed == fine, (option, value, err.getvalue())
+    if parsed:
+        assert getattr(args, flag[2:].replace("-", "_")) in (number, [number])
+    else:
+        assert err.getvalue().count("\n") == 1 and f"argument {flag}" in err.getvalue()
