@@ -166,7 +166,8 @@ HOSTILE_TESTS = ["tests/test_surfaces.py",
 # input class -> (the surfaces tried, what every case must give)
 INPUT_CLASSES = {
     "goal reward (HER's compute_reward)": (
-        "both laryngoscope ids, single and vector env, dict observations, the blade levering on the teeth",
+        "both laryngoscope ids, single and vector env, dict observations, the blade levering on the teeth; "
+        "random actions and reward weights",
         "compute_reward of a step's own goals equals its reward bit for bit, the incisor term included"),
     "settings on every path": (
         "every id through gym.make, make_vec (sync and vector entry point), the torch backend and the SB3 "
@@ -178,11 +179,12 @@ INPUT_CLASSES = {
         "accepted; the replay's shape error equals the run's bit for bit off the walls, within 2 % where a "
         "wall stopped a partial-speed move"),
     "ambiguous logs": (
-        "a column twice, both schemas' columns, an unknown column, a 599 s gap, a short row",
+        "a column twice, both schemas' columns, an unknown column, a 599 s gap, a short row; any header "
+        "drawn from both schemas' columns and two unknown ones, repeats included",
         "refused in one line naming the file, row and column; exit 2"),
     "oversized logs": (
-        "1e7 s of log, an NPZ header declaring 1e11 numbers, 80 MB inflating from a few hundred kB; a valid "
-        "200,000-row CSV",
+        "1e7 s of log, an NPZ header declaring 1e11 numbers, 80 MB inflating from a few hundred kB, any shape "
+        "and dtype an NPZ header may claim; a valid 200,000-row CSV",
         "refused from headers and sizes with under 32 MB traced; the valid one read in under 3x its table's memory"),
     "damaged logs": (
         "truncated and random NPZ, UTF-16 and binary CSV, columns of unequal length, a non-scalar "
@@ -193,9 +195,9 @@ INPUT_CLASSES = {
         "rows and numeric strings to score_hand_log, degrade, replay_hand and HapticLoop.tick",
         "ValueError naming the argument, the env's state bit for bit as before; rewards stay Python floats"),
     "command lines": (
-        "compare, bench, play, data, fit and score options out of range or of unknown choices; --out an "
-        "existing file; a file name that is not UTF-8",
-        "one line naming the option, exit 2, nothing written"),
+        "compare, bench, play, data, fit and score options out of range or of unknown choices; any value "
+        "(numbers, NaN, inf, text) of every numeric option; --out an existing file; a file name that is not UTF-8",
+        "accepted exactly within the documented range; else one line naming the option, exit 2, nothing written"),
     "all-or-nothing writes": (
         "score --out and compare's report set whose last file fails to write; trajectories written through a "
         "failing writer",
