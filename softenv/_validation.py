@@ -21,6 +21,15 @@ def _show(value: Any) -> str:
     return repr(value)
 
 
+def printable(text: str) -> str:
+    """``text`` with the bytes of file names that are not UTF-8 (surrogates, as Python reads them from the
+    command line) shown as ``\\xff`` escapes, so that printing, writing or drawing it never fails."""
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:                        # lone surrogates of another origin
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
 def check_real(value: Any, name: str, low: float | None = None, high: float | None = None,
                *, low_open: bool = False, high_open: bool = False) -> float:
     """A finite real number inside ``[low, high]`` (ends open where asked); returned as float."""

@@ -26,7 +26,7 @@ from .parallel import Job, run_jobs, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
 from .shape_model import ShapeModel
 from ._artifact import check_out_dir
-from ._validation import check_int, check_real
+from ._validation import check_int, check_real, printable
 from .training import play
 from .training.logs import MAX_DURATION_S
 from .training.scoring import score_file
@@ -195,15 +195,6 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, printable(f"{self.prog}: error: {message}\n"))
-
-
-def printable(text: str) -> str:
-    """``text`` with the bytes of file names that are not UTF-8 (surrogates, as Python reads them from the
-    command line) shown as ``\\xff`` escapes, so that printing it never fails."""
-    try:
-        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
-    except UnicodeEncodeError:                        # lone surrogates of another origin
-        return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def build_parser() -> argparse.ArgumentParser:

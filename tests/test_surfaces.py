@@ -473,3 +473,16 @@ def test_every_numeric_option_is_accepted_exactly_within_its_range(option, value
         assert getattr(args, flag[2:].replace("-", "_")) in (number, [number])
     else:
         assert err.getvalue().count("\n") == 1 and f"argument {flag}" in err.getvalue()
+
+
+def test_a_log_whose_name_is_not_utf8_scores_and_its_report_shows_the_name_escaped(tmp_path, capsys, tried):
+    """The name reaches the report's Markdown, JSON and figure title: escaped, so none of them fails."""
+    from softenv.cli import main
+    from softenv.training import scoring
+
+    tried["command lines"] += 1
+    name = tmp_path / b"\xfe.csv".decode("utf-8", "surrogateescape")
+    scoring.save_trajectory(scoring.expert_trajectory(duration_s=1.0), name)
+    assert main(["score", str(name), "--out", str(tmp_path / "report")]) == 0
+    written = sorted((tmp_path / "report").iterdir())
+    assert len(written) == 3 and "\\xfe.csv" in next(p for p in written if p.suffix == ".md").read_text()

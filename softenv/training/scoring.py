@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
-from .._validation import check_choice, check_real
+from .._validation import check_choice, check_real, printable
 from ..devices.laryngoscope.physics import hand_action
 from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
@@ -258,14 +258,15 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
         check_ranges(table, config, source)
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
         parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
-    report = {"trajectory": str(path), "log": schema.name, "scene": scene_sections(scene), **parts, "weights": weights,
+    report = {"trajectory": printable(str(path)), "log": schema.name, "scene": scene_sections(scene), **parts, "weights": weights,
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
     if out_dir is not None:                 # the three files all or nothing: a failed write leaves none of them
         out = Path(out_dir)
         stem = Path(path).stem
         atomic_write_all([(out / f"{stem}_score.json", lambda fh: fh.write(json.dumps(report, indent=2)), True),
                           (out / f"{stem}_score.md", lambda fh: fh.write(_markdown(report)), True),
-                          (out / f"{stem}_score.png", _plot(trainee, expert, f"{stem}: score {parts['score']:.0f}/100"),
+                          (out / f"{stem}_score.png", _plot(trainee, expert,
+                                                            printable(f"{stem}: score {parts['score']:.0f}/100")),
                            False)])
     return report
 
