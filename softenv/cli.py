@@ -174,11 +174,11 @@ def cmd_score(args: argparse.Namespace) -> None:
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
     parts = ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"])
-    print(f"{args.trajectory} ({report['log']}): score {report['score']:.1f}/100 ({parts}); final error "
+    print(printable(f"{args.trajectory} ({report['log']}): score {report['score']:.1f}/100 ({parts}); final error "
           f"{m['final_error_mm']:.3f} mm, time to target {ttt}, peak tongue force {m['peak_force_N']:.1f} N"
-          + (f", peak incisor force {m['clinical']['peak_incisor_force_N']:.1f} N" if "clinical" in m else ""))
+          + (f", peak incisor force {m['clinical']['peak_incisor_force_N']:.1f} N" if "clinical" in m else "")))
     if args.out:
-        print(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png")
+        print(printable(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png"))
 
 
 def cmd_play(args: argparse.Namespace) -> None:
