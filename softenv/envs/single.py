@@ -151,7 +151,9 @@ class SoftSphereEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release. Since 2026-11-25 the ids register no ``max_episode_steps``
+      (``env.spec.max_episode_steps`` is ``None``; read ``env.unwrapped.world.horizon``) and HER's
+      ``compute_reward`` includes the device's reward terms.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}
