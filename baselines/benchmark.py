@@ -222,6 +222,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
         write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem)
+        echo(f"wrote {out_dir / stem}.md, .csv and .json, {out_dir / _error_plot_name(stem)}, "
+             f"{out_dir / stem}_learning_curves.png and _gallery.png")
     if failed:
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))

@@ -364,3 +364,17 @@ def test_mlp_scene_builds_and_steps():
     env.reset(seed=0)
     obs, reward, *_ = env.step(np.array([0.3, 0.1, 0.5, 0.2], np.float32))
     assert np.isfinite(obs).all() and env.observation_space.contains(obs)
+
+
+def test_describe_config_is_a_valid_markdown_table_with_every_setting():
+    """Six cells a row, a "|" inside a cell escaped (choices are written "a | b"), every schema key once."""
+    import re
+
+    from softenv.envs.config import SCHEMA
+
+    rows = softenv.describe_config().splitlines()
+    cells = [re.split(r"(?<!\\)\|", row)[1:-1] for row in rows]
+    assert all(len(c) == 6 for c in cells), [r for r, c in zip(rows, cells) if len(c) != 6][:2]
+    keys = [(c[0].strip(), c[1].strip()) for c in cells[2:]]
+    assert keys == [(s, k) for s, fields in SCHEMA.items() for k in fields]
+    assert any("\\|" in row for row in rows)             # the choices' bars, escaped

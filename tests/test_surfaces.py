@@ -327,8 +327,10 @@ def test_a_benchmark_report_is_written_all_or_nothing(tmp_path, monkeypatch, tri
         benchmark.run(plan, tmp_path / "report", tmp_path / "runs", "test", echo=lambda s: None)
     assert not (tmp_path / "report").exists() or list((tmp_path / "report").iterdir()) == []
     monkeypatch.undo()
-    benchmark.run(plan, tmp_path / "report", tmp_path / "runs", "test", echo=lambda s: None)
+    said: list[str] = []
+    benchmark.run(plan, tmp_path / "report", tmp_path / "runs", "test", echo=said.append)
     assert len(list((tmp_path / "report").iterdir())) == 6
+    assert said[-1].startswith(f"wrote {tmp_path / 'report' / 'benchmark'}.md, .csv and .json")   # says where
 
 
 def _training_calls():

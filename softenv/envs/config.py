@@ -316,7 +316,8 @@ def describe_config() -> str:
     for section, fields in SCHEMA.items():
         for key, f in fields.items():
             default = f"{f.default:.4g}" if isinstance(f.default, float) else repr(f.default)
-            lines.append(f"| {section} | {key} | {default} | {f.unit} | {f.allowed} | {f.doc} |")
+            cells = (section, key, default, f.unit, f.allowed, f.doc)
+            lines.append("| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |")   # a cell's "|" escaped
     return "\n".join(lines)
 
 
