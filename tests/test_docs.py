@@ -27,3 +27,17 @@ def test_ci_runs_the_readme_test_command():
 def test_constraints_pin_the_cpu_torch():
     lines = [line.strip() for line in (ROOT / "constraints.txt").read_text().splitlines()]
     assert "torch==2.13.0" in lines
+
+
+def test_the_version_is_written_once_and_the_package_is_typed():
+    import importlib.metadata
+    import tomllib
+
+    import softenv
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert "version" not in project["project"] and project["project"]["dynamic"] == ["version"]
+    assert importlib.metadata.version("softenv") == softenv.__version__
+    assert (ROOT / "softenv" / "py.typed").exists() and "py.typed" in project["tool"]["setuptools"]["package-data"]["softenv"]
+    changelog = (ROOT / "CHANGELOG.md").read_text()
+    assert "## [Unreleased]" in changelog and f"## [{softenv.__version__}]" in changelog
