@@ -240,7 +240,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="speed and memory benchmarks against CartPole-v1 (writes perf.md/.json)")
     p.add_argument("--quick", action="store_true", help="smaller sizes; writes perf_quick.*")
-    p.add_argument("--out", default="results", help="output directory (default: results)")
+    p.add_argument("--out", default="reports", help="output directory (default: reports, which git ignores; "
+                                                    "--out results refreshes the committed results)")
     p.add_argument("--only", nargs="+", choices=list(bench.SECTIONS), metavar="SECTION",
                    help=f"run only these sections: {', '.join(bench.SECTIONS)} (default: all but gpu)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
@@ -258,7 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "present; ideal-device scenes) (default: quick and full: the four SB3 agents)")
     p.add_argument("--episodes", type=_bounded(int, 1, 100_000),
                    help="test episodes per policy and scene (1-100000; default 100)")
-    p.add_argument("--out", default="results", help="report directory (default: results)")
+    p.add_argument("--out", default="reports", help="report directory (default: reports, which git ignores; "
+                                                    "--out results refreshes the committed results)")
     p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
     p.add_argument("--jobs", type=_bounded(int, 1, 4096), default=None,
                    help="worker processes (local) or CPUs of a new local Ray instance (default: every usable core; "

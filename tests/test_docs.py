@@ -41,3 +41,16 @@ def test_the_version_is_written_once_and_the_package_is_typed():
     assert (ROOT / "softenv" / "py.typed").exists() and "py.typed" in project["tool"]["setuptools"]["package-data"]["softenv"]
     changelog = (ROOT / "CHANGELOG.md").read_text()
     assert "## [Unreleased]" in changelog and f"## [{softenv.__version__}]" in changelog
+
+
+def test_the_main_job_and_bench_write_where_git_does_not_look_unless_asked():
+    """`softenv compare --quick` and `softenv bench` leave `git status` clean: their default output folder,
+    like play's and the README's data folder, is ignored; `--out results` refreshes the committed results."""
+    from softenv.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["compare", "--quick"]).out == "reports"
+    assert parser.parse_args(["bench"]).out == "reports"
+    assert parser.parse_args(["play"]).out == "play"
+    ignored = (ROOT / ".gitignore").read_text().splitlines()
+    assert {"reports/", "play/", "data/"} <= set(ignored)
