@@ -215,15 +215,12 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
     echo("")
-    echo(format_table(summaries))
-    if any(CLINICAL[0] in s for s in summaries):
-        echo("")
-        echo(format_clinical(summaries))
+    echo(format_compact(summaries))
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
         write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem)
-        echo(f"wrote {out_dir / stem}.md, .csv and .json, {out_dir / _error_plot_name(stem)}, "
-             f"{out_dir / stem}_learning_curves.png and _gallery.png")
+        echo(f"wrote {out_dir / stem}.md, .csv and .json (every column, the agents' budgets, the clinical metrics), "
+             f"{out_dir / _error_plot_name(stem)}, {out_dir / stem}_learning_curves.png and _gallery.png")
     if failed:
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))
@@ -278,6 +275,24 @@ def format_table(summaries: list[dict[str, Any]]) -> str:
                  _fmt(s["final_error_mm"], 3), _fmt(s["success"], 2), _fmt(s["steps_to_success"], 1),
                  _fmt(s["peak_force_N"], 1), f"{s['decision_us']:.0f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+COMPACT = [("scene", 36), ("policy", 12), ("score [95 % CI]", 20), ("IQM", 5), ("err mm", 6), ("success", 7),
+           ("peak N", 6), ("us/step", 7)]
+
+
+def format_compact(summaries: list[dict[str, Any]]) -> str:
+    """The table for a terminal: one line a cell, at most 120 columns (the full tables go to the files)."""
+    def row(cells: list[str]) -> str:
+        return "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, (_, w)) in enumerate(zip(cells, COMPACT)))
+
+    lines = [row([name for name, _ in COMPACT])]
+    for s in summaries:
+        score = s["normalized_score"]
+        lines.append(row([s["scene"], s["policy"], _fmt(score, 1), f"{score['iqm']:.1f}",
+                          f"{s['final_error_mm']['mean']:.3f}", f"{s['success']['mean']:.2f}",
+                          f"{s['peak_force_N']['mean']:.1f}", f"{s['decision_us']:.0f}"]))
     return "\n".join(lines)
 
 

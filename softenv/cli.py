@@ -158,7 +158,8 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
         plan.episodes = args.episodes
     if args.quick:
         print(f"softenv compare --quick: {' and '.join(plan.scenes)} test targets, {plan.episodes} episodes per policy; "
-              f"agents trained now on SoftSphere-v0 for {plan.timesteps} env steps (1 seed) -- short budgets, not the "
+              f"agents trained now on SoftSphere-v0 for "
+              f"{', '.join(f'{a} {n:,}' for a, n in plan.timesteps.items())} env steps (1 seed) -- short budgets, not the "
               "full benchmark")
     benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv),
                   stem="benchmark_quick" if args.quick else "benchmark", executor=args.executor,
