@@ -188,6 +188,9 @@ def cmd_play(args: argparse.Namespace) -> None:
     check_out_dir(args.out, "--out")                 # before the session: a refusal after it would lose it
     if args.headless:
         play.headless()
+    elif not play.display_available():              # else SDL would run a session nobody sees
+        raise ValueError("no display to open a window on (DISPLAY and WAYLAND_DISPLAY are unset): run softenv play "
+                         "on a desktop, or pass --headless for a session without a window")
     play.run(args.seconds, args.out)
 
 

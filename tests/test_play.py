@@ -72,3 +72,27 @@ def test_a_session_with_keys_held_together_into_the_walls_replays_as_it_was_play
     assert metrics["final_error_mm"] == session.live_final_error_mm
     for key in ("peak_tongue_force_N", "tongue_force_time_Ns", "hand_path_m", "glottic_view_pct"):
         assert metrics["clinical"][key] == session.live_clinical[key], key
+
+
+def test_without_a_display_play_refuses_in_one_line_unless_headless(tmp_path, monkeypatch, capsys):
+    from softenv.cli import main
+
+    for var in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr(play.sys, "platform", "linux")
+    assert main(["play", "--seconds", "0.3", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no display" in err and "--headless" in err
+    assert not (tmp_path / "s").exists()
+    monkeypatch.setenv("DISPLAY", ":99")
+    assert play.display_available()
+
+
+def test_a_session_opens_no_sound_device(tmp_path, monkeypatch):
+    """pygame.init() would open the mixer (a page of ALSA errors on machines without sound): play does not."""
+    play.headless()
+    opened = []
+    monkeypatch.setattr(pygame, "init", lambda: opened.append("init"))
+    monkeypatch.setattr(pygame.mixer, "init", lambda *a, **k: opened.append("mixer"))
+    play.run(seconds=0.1, out_dir=tmp_path, realtime=False, echo=lambda s: None)
+    assert opened == [] and not pygame.mixer.get_init()

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -114,7 +115,10 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     env = haptic_env(scene, steps)
     world = env.world
     env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
-    pygame.init()
+    # the display and fonts only (joysticks in Controls): pygame.init() would also open the mixer, whose
+    # ALSA back end prints a page of errors on machines without sound, and a session makes no sound
+    pygame.display.init()
+    pygame.font.init()
     try:
         screen = pygame.display.set_mode(SIZE)
         pygame.display.set_caption("softenv play: SoftSphereHaptic-v0")
@@ -196,6 +200,14 @@ def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, ste
              "arrows: insert / lift   A D: sweep   Q E: pitch   Esc: end"]
     for i, text in enumerate(lines):
         screen.blit(font.render(text, True, (20, 20, 20)), (x0, 290 + 28 * i))
+
+
+def display_available() -> bool:
+    """Whether a window can be shown: a desktop (macOS, Windows), an X or Wayland display, or an SDL
+    video driver chosen on purpose (``SDL_VIDEODRIVER``; ``dummy`` for scripted sessions)."""
+    if not sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return True
+    return any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"))
 
 
 def headless() -> None:
