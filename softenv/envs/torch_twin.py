@@ -197,19 +197,19 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:
-        if not isinstance(actions, torch.Tensor):       # host data: the numpy twin's one check (it names the problem)
-            host = check_actions(actions, self.num_envs) if self.check_actions else np.asarray(actions, np.float64)
-            return torch.as_tensor(host, device=self.torch_device).to(self.dtype)
+        if not self.check_actions:                     # the unchecked fast path: no host copy, no host sync
+            return torch.as_tensor(actions, device=self.torch_device).to(self.dtype)
+        if not isinstance(actions, torch.Tensor):      # host data: the numpy twin's one check (it names the problem)
+            return torch.as_tensor(check_actions(actions, self.num_envs), device=self.torch_device).to(self.dtype)
         a = actions.to(self.torch_device)
-        if self.check_actions:
-            if tuple(a.shape) != (self.num_envs, 4):
-                raise ValueError(f"actions must have shape ({self.num_envs}, 4); got {tuple(a.shape)}")
-            if a.is_complex() or a.dtype == torch.bool:
-                raise ValueError(f"actions must be real numbers; got dtype {a.dtype}")
-            bad = ~((a >= -1.0) & (a <= 1.0))
-            if bool(bad.any()):
-                i, j = (int(x) for x in bad.nonzero()[0])
-                raise ValueError(f"actions[{i}, {j}] = {float(a[i, j])!r}: actions must be finite and within [-1, 1]")
+        if tuple(a.shape) != (self.num_envs, 4):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 4); got {tuple(a.shape)}")
+        if a.is_complex() or a.dtype == torch.bool:
+            raise ValueError(f"actions must be real numbers; got dtype {a.dtype}")
+        bad = ~((a >= -1.0) & (a <= 1.0))
+        if bool(bad.any()):
+            i, j = (int(x) for x in bad.nonzero()[0])
+            raise ValueError(f"actions[{i}, {j}] = {float(a[i, j])!r}: actions must be finite and within [-1, 1]")
         return a.to(self.dtype)
 
     def _response(self, x: torch.Tensor) -> torch.Tensor:
