@@ -16,9 +16,6 @@ from typing import Any, Callable, NoReturn
 import numpy as np
 
 from baselines import benchmark
-from baselines.benchmark import AGENTS
-from baselines.evaluate import SCENES
-from baselines.policies import BASELINES
 
 from . import bench
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
@@ -254,11 +251,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
     p.add_argument("--quick", action="store_true",
                    help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
-    p.add_argument("--scenes", nargs="+", choices=list(SCENES), metavar="SCENE",
-                   help=f"benchmark scenes: {', '.join(SCENES)} (default: all in full mode)")
-    p.add_argument("--policies", nargs="*", choices=list(BASELINES), metavar="POLICY",
-                   help=f"baseline policies: {', '.join(BASELINES)} (default: all; none: no baselines)")
-    p.add_argument("--agents", nargs="*", choices=list(AGENTS), metavar="AGENT",
+    p.add_argument("--scenes", nargs="+", choices=list(benchmark.SCENES), metavar="SCENE",
+                   help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
+    p.add_argument("--policies", nargs="*", choices=list(benchmark.BASELINES), metavar="POLICY",
+                   help=f"baseline policies: {', '.join(benchmark.BASELINES)} (default: all; none: no baselines)")
+    p.add_argument("--agents", nargs="*", choices=list(benchmark.AGENTS), metavar="AGENT",
                    help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
                    "present; ideal-device scenes) (default: quick and full: the four SB3 agents)")
     p.add_argument("--episodes", type=_bounded(int, 1, 100_000),

@@ -112,8 +112,7 @@ def action_to(now: np.ndarray, goal: np.ndarray, dt: float, p: LaryngoscopeParam
     wall = side * (side * (goal - now) >= 0.0)                # ends on a wall it moved toward (or sat at)
     if not wall.any():
         return np.clip(action, -1.0, 1.0) if np.abs(action).max() <= 1.0 + tol else None
-    scale = np.array([p.max_sweep_speed, p.max_pitch_rate])              # y <- action[2], pitch <- action[3]
-    for axis, j, speed in ((3, 2, scale[0]), (2, 3, scale[1])):
+    for axis, j, speed in ((3, 2, p.max_sweep_speed), (2, 3, p.max_pitch_rate)):   # y <- action[2], pitch <- [3]
         if wall[axis]:
             if wall[axis] * v[axis] > speed * (1.0 + tol):
                 return None

@@ -124,7 +124,7 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
     if not zipfile.is_zipfile(path):         # np.load would try it as a pickle and talk about that
         raise ValueError(f"{name} cannot be read as NPZ: not a zip archive")
     with zipfile.ZipFile(path) as archive:
-        members = [m for m in archive.infolist()]
+        members = archive.infolist()
         names = [m.filename.removesuffix(".npy") for m in members]
         if len(members) > 2 * len(SCHEMAS[0].columns) + 1:
             raise ValueError(f"{name} has {len(members)} members; a log has one per column and format_version")
