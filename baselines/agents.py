@@ -1,11 +1,14 @@
 """SB3 agents on SoftSphere: hyper-parameters from rl-zoo-style YAML, training on the batched twin
-with CSV/TensorBoard logs, evaluation on the test targets, checkpoints and resume; saved agents
-carry their scene and observation layout, checked on load."""
+with CSV/TensorBoard logs and evaluation on the test targets; a run directory holds a finished run or
+nothing; saved agents carry their scene, observation layout and model digest, checked on load."""
 
 from __future__ import annotations
 
 import ast
+import hashlib
 import json
+import os
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +28,7 @@ ALGOS: dict[str, tuple[str, str]] = {
     "td3": ("TD3", "td3.yml"),
     "sac-her": ("SAC", "her.yml"),
 }
-AGENT_FORMAT_VERSION = 1
+AGENT_FORMAT_VERSION = 2        # 2: the model's digest, no resumes
 
 
 def _literal_dict(text: str) -> dict[str, Any]:
@@ -81,14 +84,17 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
-                progress: bool = True, eval_episodes: int = 20, resume: bool = True) -> Path:
-    """Train (or resume) one agent; returns the path of the final model (``model.zip``).
+                progress: bool = True, eval_episodes: int = 20, reuse: bool = True) -> Path:
+    """Train one agent from its seed into ``out_dir``; returns the path of its model (``model.zip``).
 
-    A run that finds checkpoints in ``out_dir`` (and no final model) resumes from the last one; its
-    ``agent.json`` lists the env steps it resumed at (``resumed_at``), because a resumed run is not
-    bit for bit the same as one that ran through."""
+    The run is written into ``<out_dir>.partial`` and renamed to ``out_dir`` once whole, so ``out_dir``
+    holds a finished run or nothing. With ``reuse``, a finished run of the same agent, seed, budget and
+    scene is loaded, not trained again; anything else there (a run of other settings, a damaged
+    model) is replaced. A run that was stopped starts again from its seed: training from the seed is
+    bit for bit reproducible, a restart from a checkpoint would not be (SB3's checkpoints keep neither
+    the envs' states nor the random streams), and a job loses at most its own minutes."""
     import stable_baselines3 as sb3                         # the rl extra
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback  # the rl extra
+    from stable_baselines3.common.callbacks import EvalCallback  # the rl extra
     from stable_baselines3.common.logger import configure   # the rl extra
 
     env_id = scene_kwargs(scene)[0]
@@ -98,10 +104,13 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     params.pop("n_timesteps", None)
     params.pop("env_kwargs", None)               # for the env (make_training_env), not the algorithm
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    final = out / "model.zip"
-    if final.exists() and resume:
-        return final
+    wanted = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
+              **_layout(algo, scene)}
+    if reuse and finished_run(out, wanted) is None:
+        return out / "model.zip"
+    partial = out.with_name(out.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)   # what a stopped run left
+    partial.mkdir(parents=True)
     env = make_training_env(algo, scene, n_envs)
     cls = getattr(sb3, ALGOS[algo][0])
     if params.get("replay_buffer_class") == "HerReplayBuffer":
@@ -113,21 +122,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
         from stable_baselines3.common.noise import NormalActionNoise  # the rl extra
 
         params["action_noise"] = NormalActionNoise(np.zeros(4), noise_std * np.ones(4))
-    checkpoints = sorted(out.glob("checkpoints/agent_*_steps.zip"), key=lambda p: int(p.stem.split("_")[1]))
-    resumes = out / "checkpoints" / "resumed_at.json"
-    if checkpoints and resume:
-        model = cls.load(checkpoints[-1], env=env, device="cpu")
-        buffer = checkpoints[-1].with_name(checkpoints[-1].stem.replace("agent_", "agent_replay_buffer_") + ".pkl")
-        if buffer.exists() and hasattr(model, "load_replay_buffer"):
-            model.load_replay_buffer(buffer)
-        # a checkpoint keeps the model and replay buffer, not the envs' mid-episode states or the random
-        # streams, so a resumed run is not bit for bit the run that was not stopped: it is recorded
-        resumed_at = [*(json.loads(resumes.read_text()) if resumes.exists() else []), int(model.num_timesteps)]
-        resumes.write_text(json.dumps(resumed_at))
-    else:
-        model = cls(params.pop("policy"), env, seed=seed, device="cpu", verbose=0, **params)
-        resumed_at = []
-        resumes.unlink(missing_ok=True)
+    model = cls(params.pop("policy"), env, seed=seed, device="cpu", verbose=0, **params)
     formats = ["csv"]
     try:
         import tensorboard  # noqa: F401
@@ -135,27 +130,48 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
         formats.append("tensorboard")
     except ImportError:
         pass
-    model.set_logger(configure(str(out / "logs"), formats))
+    model.set_logger(configure(str(partial / "logs"), formats))
     eval_env = make_training_env(algo, scene, min(eval_episodes, 10), split="test")
-    callbacks = CallbackList([
-        EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
-                     log_path=str(out / "eval"), best_model_save_path=str(out / "best"), verbose=0),
-        CheckpointCallback(max(budget // (4 * n_envs), 1), str(out / "checkpoints"), name_prefix="agent",
-                           save_replay_buffer=hasattr(model, "replay_buffer")),
-    ])
-    model.learn(budget - model.num_timesteps, callback=callbacks, progress_bar=progress and _has_progress_bar(),
-                reset_num_timesteps=False)
-    model.save(final)
-    meta = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-            "resumed_at": resumed_at, **_layout(algo, scene)}
-    (out / "agent.json").write_text(json.dumps(meta, indent=2))
+    callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
+                            log_path=str(partial / "eval"), best_model_save_path=str(partial / "best"), verbose=0)
+    model.learn(budget, callback=callback, progress_bar=progress and _has_progress_bar())
+    model.save(partial / "model.zip")
+    meta = {**wanted, "model_sha256": _sha256(partial / "model.zip")}
+    (partial / "agent.json").write_text(json.dumps(meta, indent=2))
     env.close()
     eval_env.close()
-    return final
+    if out.exists():
+        shutil.rmtree(out)                       # a run of other settings, or one not reused
+    os.replace(partial, out)                     # the whole run appears at once
+    return out / "model.zip"
+
+
+def finished_run(out: Path, wanted: dict[str, Any]) -> str | None:
+    """``None`` when ``out`` holds a finished run with the settings ``wanted``; else why not."""
+    meta_path, model = out / "agent.json", out / "model.zip"
+    if not (meta_path.is_file() and model.is_file()):
+        return "no finished run"
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        return f"agent.json is unreadable ({exc})"
+    if not isinstance(meta, dict):
+        return "agent.json is not a JSON object"
+    other = {k: (meta.get(k), v) for k, v in wanted.items() if meta.get(k) != v}
+    if other:
+        return "made with other settings: " + ", ".join(f"{k}={a!r} (wanted {b!r})" for k, (a, b) in other.items())
+    if meta.get("model_sha256") != _sha256(model):
+        return "model.zip does not match the digest in agent.json (damaged or replaced)"
+    return None
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def load_agent(path: str | Path, scene: str) -> SB3Policy:
-    """Load an agent saved by :func:`train_agent` for ``scene``; another scene or layout is an error."""
+    """Load an agent saved by :func:`train_agent` for ``scene``; another scene or layout, or a model
+    that is not the one its ``agent.json`` names, is an error."""
     import stable_baselines3 as sb3                         # the rl extra
 
     path = Path(path)
@@ -165,7 +181,7 @@ def load_agent(path: str | Path, scene: str) -> SB3Policy:
     meta = json.loads(meta_path.read_text())
     if meta.get("format_version") != AGENT_FORMAT_VERSION:
         raise ValueError(f"{str(meta_path)!r}: format_version={meta.get('format_version')!r}; "
-                         f"this softenv reads {AGENT_FORMAT_VERSION}")
+                         f"this softenv reads {AGENT_FORMAT_VERSION} (train the agent again)")
     algo = meta.get("algo")
     if algo not in ALGOS:
         raise ValueError(f"{str(meta_path)!r}: unknown agent {algo!r}; valid agents: {list(ALGOS)}")
@@ -174,15 +190,14 @@ def load_agent(path: str | Path, scene: str) -> SB3Policy:
         if meta.get(key) != wanted[key]:
             raise ValueError(f"agent {str(path)!r} was trained for scene {meta.get('scene')!r} "
                              f"({key}={meta.get(key)!r}); asked for scene {scene!r} ({key}={wanted[key]!r})")
-    resumed_at = meta.get("resumed_at", [])       # absent in files written before it was recorded
-    if not (isinstance(resumed_at, list) and all(type(step) is int for step in resumed_at)):
-        raise ValueError(f"{str(meta_path)!r}: resumed_at={resumed_at!r}; expected a list of env steps (ints)")
+    if meta.get("model_sha256") != _sha256(path):
+        raise ValueError(f"{str(path)!r} does not match model_sha256 in {str(meta_path)!r}: the model is damaged "
+                         "or not the one trained with it")
     # HER's replay buffer needs an env to rebuild itself, even for inference
     env = make_training_env(algo, scene, 1, split="test") if algo == "sac-her" else None
     model = getattr(sb3, ALGOS[algo][0]).load(path, env=env, device="cpu")
     policy = SB3Policy(model, algo)
     policy.obs_mode = wanted["obs_mode"]
-    policy.resumed_at = resumed_at
     return policy
 
 

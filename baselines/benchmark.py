@@ -28,13 +28,14 @@ from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 
-from softenv.parallel import Job, describe, run_jobs
+from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import anchor_job
 from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .planner import TrajectoryOracle
 from .policies import BASELINES, applies, make_baseline
+from .run_store import RunStore
 
 
 @dataclass
@@ -114,13 +115,13 @@ def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
     return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes)
 
 
-AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None, list[int]]
+AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]
 
 
 def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
-    """Train (or resume) one agent and evaluate it; also returns its learning curve (test-target
-    return against env steps) and the env steps its training resumed at, so the driver needs no
-    access to the worker's files."""
+    """Train one agent (or load it, when ``run_dir`` holds its finished run) and evaluate it; also returns
+    its learning curve (test-target return against env steps), so the driver needs no access to the
+    worker's files."""
     _torch_single_thread()
     path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
     agent = load_agent(path, scene)
@@ -130,7 +131,7 @@ def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None
     if log.exists():
         with np.load(log, allow_pickle=False) as data:
             curve = (data["timesteps"], data["results"].mean(axis=1))
-    return episodes_, curve, agent.resumed_at
+    return episodes_, curve
 
 
 def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
@@ -150,7 +151,7 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
         agent, _ = ppo_torch.train(args, log=lambda line: None)
         path.parent.mkdir(parents=True, exist_ok=True)
         ppo_torch.save(agent, args, path)
-    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None, []     # trained in one go, never resumed
+    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
 
 
 def torch_device() -> str:
@@ -163,14 +164,35 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         write: bool = True, stem: str = "benchmark", executor: str = "local", n_jobs: int = 1,
         retries: int = 1) -> list[dict[str, Any]]:
     """Evaluate the plan over ``executor`` (see :mod:`softenv.parallel`); print the table; write the
-    reports when ``write``. Results do not depend on the executor or the number of workers."""
+    reports when ``write``. Results do not depend on the executor or the number of workers, nor on
+    whether the run was stopped and resumed: each finished job is kept in ``runs_dir/jobs``
+    (:mod:`baselines.run_store`) and read back by the next run of the same plan."""
     check_names(plan)
     _torch_single_thread()
     if TORCH_PPO in plan.agents and torch_device() == "cpu":
         echo(f"{TORCH_PPO}: no GPU in this process; it trains on CPU tensors (the table says so)")
     started = time.perf_counter()
     grid = jobs(plan, runs_dir)
-    results = {r.key: r for r in run_jobs(grid, executor, n_jobs, retries, echo)}
+    store = RunStore(runs_dir)
+    results: dict[str, JobResult] = {}
+    for job in grid:
+        kept, why = store.load(job)
+        if kept is not None:
+            results[job.key] = kept
+        elif why != "absent":
+            echo(f"{job.key}: its entry in {store.dir} is not used ({why}); the job runs again")
+    if results:
+        echo(f"resuming: {len(results)} of {len(grid)} jobs were finished by an earlier run ({store.dir})")
+    todo = [job for job in grid if job.key not in results]
+    by_key = {job.key: job for job in todo}
+    try:
+        for r in run_jobs(todo, executor, n_jobs, retries, echo, on_result=lambda r: store.save(by_key[r.key], r)):
+            results[r.key] = r
+    except Interrupted as exc:
+        exc.kept = (f"{store.count()} finished jobs are kept in {store.dir} (trained agents beside it); "
+                    "run the same command to resume")
+        raise
+    reused = len(grid) - len(todo)
     summaries: list[dict[str, Any]] = []
     timings: dict[str, float] = {}
     curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -196,9 +218,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             done = [r.value for r in runs if r.ok]
             if not done:
                 continue
-            curves[(scene, algo)] = [curve for _, curve, _ in done if curve is not None]
-            pooled = [e for e, _, _ in done]
-            resumed = [seed for seed, r in enumerate(runs) if r.ok and r.value[2]]
+            curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
+            pooled = [e for e, _ in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
             merged.values["normalized_score"] = np.concatenate(
@@ -209,16 +230,14 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             else:
                 budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
                 what = f"{budget:,} steps"
-            if resumed:
-                what += f"; seed{'s' if len(resumed) > 1 else ''} {', '.join(map(str, resumed))} resumed"
-            summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done), resumed_seeds=resumed))
+            summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done)))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
     echo("")
     echo(format_compact(summaries))
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
-        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem)
+        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem, reused)
         echo(f"wrote {out_dir / stem}.md, .csv and .json (every column, the agents' budgets, the clinical metrics), "
              f"{out_dir / _error_plot_name(stem)}, {out_dir / stem}_learning_curves.png and _gallery.png")
     if failed:
@@ -327,8 +346,8 @@ def provenance(command: str) -> dict[str, Any]:
 
 def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, command: str, elapsed: float,
                   timings: dict[str, float], curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
-                  how: str, failed: list[Any], stem: str = "benchmark") -> None:
-    prov = {**provenance(command), "executor": how}
+                  how: str, failed: list[Any], stem: str = "benchmark", reused: int = 0) -> None:
+    prov = {**provenance(command), "executor": how, "jobs_from_earlier_runs": reused}
 
     def write_csv(fh: Any) -> None:
         fh.write(f"# made by: {command} at {prov['code']} ({prov['date']}; softenv {prov['softenv']}, "
@@ -347,7 +366,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
                                             {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes})
                for a in plan.agents}
     md = ["# Benchmark: baselines and agents on SoftSphere\n",
-          f"Made by `{command}` at {prov['code']} in {elapsed / 60:.1f} min over {how} ({prov['date']}; {prov['machine']}, single-threaded torch "
+          f"Made by `{command}` at {prov['code']} in {elapsed / 60:.1f} min over {how}"
+          f"{f' ({reused} of its jobs read from an earlier run of the same plan)' if reused else ''} "
+          f"({prov['date']}; {prov['machine']}, single-threaded torch "
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
@@ -357,10 +378,7 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           "oracle: on the ideal device the true response and creep planned ahead (`baselines.policies.PlanningOracle`), "
           "on the laryngoscope every episode planned through the device, contact and tissue by the cross-entropy "
           f"method from the scripted expert's actions (`baselines.planner.TrajectoryOracle`, {_oracle_text(plan)}; "
-          "its decision time is its planning time per control step). Decision time: one observation, median."
-          + (" An agent whose kind names resumed seeds was trained in more than one sitting (resumed from its last "
-             "checkpoint; `agent.json` lists the steps in `resumed_at`): such a run is not bit for bit the run from "
-             "scratch." if any(s.get("resumed_seeds") for s in summaries) else "") + "\n",
+          "its decision time is its planning time per control step). Decision time: one observation, median.\n",
           format_table(summaries), "",
           *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),

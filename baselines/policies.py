@@ -231,7 +231,6 @@ class SB3Policy:
     def __init__(self, model: Any, name: str) -> None:
         self.model = model
         self.name = name
-        self.resumed_at: list[int] = []            # env steps its training resumed at (agents.load_agent)
         self.obs_mode = "vector"                   # the observations it was trained on (agents.load_agent sets it)
 
     def reset(self) -> None:

@@ -1,11 +1,12 @@
-"""Train one SB3 agent on a SoftSphere scene (resumable).
+"""Train one SB3 agent on a SoftSphere scene.
 
     python -m baselines.train --algo sac --scene SoftSphere-v0 --seed 0 --out runs/sac-0
     python -m baselines.train --algo ppo --timesteps 20000 --out runs/ppo-quick
 
 Hyper-parameters come from ``baselines/hyperparams/<algo>.yml`` (rl-zoo3 format). Logs: CSV and
-TensorBoard under ``OUT/logs``, evaluations on the test targets under ``OUT/eval``, checkpoints
-under ``OUT/checkpoints``; re-running the same command resumes from the last checkpoint.
+TensorBoard under ``OUT/logs``, evaluations on the test targets under ``OUT/eval``. The run is written
+into ``OUT.partial`` and renamed to ``OUT`` when whole; re-running a finished command loads its agent,
+re-running a stopped one trains again from the seed (bit for bit the run that was not stopped).
 """
 
 from __future__ import annotations

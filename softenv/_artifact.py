@@ -82,15 +82,16 @@ def _umask() -> int:
     return mask
 
 
-def load_artifact(path: str | os.PathLike, kind: str, version: int, *,
-                  header_only: bool = False) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def load_artifact(path: str | os.PathLike, kind: str, version: int, *, header_only: bool = False,
+                  finite_only: bool = True) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Read an artifact written by :func:`save_artifact`, checking its kind and format version.
-    ``header_only``: check and return the header, read no array (the arrays come back empty)."""
+    ``header_only``: check and return the header, read no array (the arrays come back empty).
+    ``finite_only=False``: NaN and infinities are data (a metric an episode never reached)."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"path {str(path)!r} does not exist or is not a file")
     try:
-        with np.load(path, allow_pickle=False) as data:
+        with path.open("rb") as handle, np.load(handle, allow_pickle=False) as data:   # numpy leaks its own handle on a bad zip
             if _META_KEY not in data.files:
                 raise ValueError(f"{str(path)!r} is not a softenv artifact (no {_META_KEY!r} entry)")
             meta = json.loads(str(data[_META_KEY][()]))
@@ -104,10 +105,10 @@ def load_artifact(path: str | os.PathLike, kind: str, version: int, *,
         raise ValueError(f"{str(path)!r} could not be read without pickle: {exc}") from exc
     if not isinstance(meta, dict):
         raise ValueError(f"{str(path)!r} has a header of type {type(meta).__name__}; expected a JSON object")
-    for name, a in arrays.items():            # every loader gets real, finite arrays or nothing
+    for name, a in arrays.items():            # every loader gets real (and finite) arrays or nothing
         if a.dtype.kind not in "biuf":
             raise ValueError(f"{str(path)!r}: array {name!r} has dtype {a.dtype}; expected real numbers")
-        if a.dtype.kind == "f" and not np.isfinite(a).all():
+        if finite_only and a.dtype.kind == "f" and not np.isfinite(a).all():
             index = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
             raise ValueError(f"{str(path)!r}: array {name!r} has {float(a[index])!r} at index {index}; artifacts hold "
                              "finite numbers only")

@@ -1,13 +1,15 @@
 """The ``softenv`` command line: ``data``, ``fit``, ``bench`` (and, with the later parts, ``compare``, ``score``).
 
 Each subcommand has ``--help``. Errors in arguments or files end the command with a one-line message
-and exit status 2, not a traceback.
+and exit status 2, not a traceback. Ctrl-C (SIGINT) or SIGTERM end it with one line saying what was kept
+and how to resume, and exit status 130 or 143; no worker process outlives it.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import signal
 import sys
 import time
 from pathlib import Path
@@ -19,7 +21,7 @@ from baselines import benchmark
 
 from . import bench
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
-from .parallel import Job, run_jobs, usable_cores
+from .parallel import Interrupted, Job, run_jobs, stop_on_signals, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
 from .shape_model import ShapeModel
 from ._artifact import check_out_dir
@@ -199,7 +201,9 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.")
+    parser = OneLineParser(prog="softenv", description="Soft-tissue deformation benchmark: data, models, benchmarks.",
+                           epilog="Exit status: 0 done, 2 bad input (one line says which), 130 or 143 stopped by Ctrl-C "
+                                  "or SIGTERM (one line says what was kept and how to resume).")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def paper_args(p: argparse.ArgumentParser, many: bool) -> None:
@@ -262,7 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="test episodes per policy and scene (1-100000; default 100)")
     p.add_argument("--out", default="reports", help="report directory (default: reports, which git ignores; "
                                                     "--out results refreshes the committed results)")
-    p.add_argument("--runs", default="runs", help="agent training runs (logs, checkpoints; resumed if present)")
+    p.add_argument("--runs", default="runs", help="run directory: finished jobs and trained agents, read back by "
+                                                  "the next run of the same plan, so a stopped run resumes (default: runs)")
     p.add_argument("--jobs", type=_bounded(int, 1, 4096), default=None,
                    help="worker processes (local) or CPUs of a new local Ray instance (default: every usable core; "
                         "1: in this process); results do not depend on it")
@@ -295,21 +300,31 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:                         # argparse's one line (or --help) has been printed
         return int(exc.code or 0)
     try:
-        if args.command == "data":
-            cmd_data(args)
-        elif args.command == "fit":
-            cmd_fit(args)
-        elif args.command == "bench":
-            cmd_bench(args, argv)
-        elif args.command == "compare":
-            cmd_compare(args, argv)
-        elif args.command == "score":
-            cmd_score(args)
-        elif args.command == "play":
-            cmd_play(args)
+        with stop_on_signals():               # SIGTERM stops as Ctrl-C does: one line, no traceback
+            return _dispatch(args, argv)
     except (ValueError, OSError) as exc:        # bad arguments, files, or a file system that refuses
         print(printable(f"softenv {args.command}: error: {exc}"), file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:            # Interrupted, or a Ctrl-C outside a fan-out
+        stop = exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
+        print(printable(f"softenv {args.command}: stopped by {signal.Signals(stop.signum).name}"
+                        + (f"; {stop.kept}" if stop.kept else "")), file=sys.stderr)
+        return stop.exit_status
+
+
+def _dispatch(args: argparse.Namespace, argv: list[str]) -> int:
+    if args.command == "data":
+        cmd_data(args)
+    elif args.command == "fit":
+        cmd_fit(args)
+    elif args.command == "bench":
+        cmd_bench(args, argv)
+    elif args.command == "compare":
+        cmd_compare(args, argv)
+    elif args.command == "score":
+        cmd_score(args)
+    elif args.command == "play":
+        cmd_play(args)
     return 0
 
 

@@ -14,21 +14,64 @@ cores and never oversubscribe them.
 
 A job that raises is retried ``retries`` times, then reported as failed (:attr:`JobResult.error`),
 never fatal to the others.
+
+Nothing outlives the run: a local worker exits within a second of its parent's death (SIGKILL
+included: it watches its parent) and ignores Ctrl-C, which is the parent's to handle. SIGINT or
+SIGTERM to the parent raise :class:`Interrupted` out of :func:`run_jobs`, after the workers are
+stopped (local) or the run's Ray tasks cancelled; ``on_result`` has seen every job finished by then,
+so a caller that keeps them (``softenv compare``'s run directory) resumes where it stopped.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 EXECUTORS = ("local", "ray")
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+PARENT_POLL_S = 0.2          # how often a local worker looks for its parent (and for the stop signal)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A run stopped by SIGINT (Ctrl-C) or SIGTERM. ``signum`` is the signal; a command line ends with
+    exit status ``128 + signum`` (130, 143), as a shell reports a process the signal ended."""
+
+    def __init__(self, signum: int, kept: str = "") -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+        self.kept = kept                 # what the run kept, and how to resume: said by the caller that knows
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """Within the block SIGINT and SIGTERM raise :class:`Interrupted` in the main thread (SIGTERM would
+    otherwise end the process with no cleanup). Elsewhere than the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise Interrupted(signum)
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 @dataclass(frozen=True)
@@ -71,9 +114,12 @@ def describe(executor: str, jobs: int) -> str:
 
 
 def run_jobs(jobs: Sequence[Job], executor: str = "local", n_jobs: int = 1, retries: int = 1,
-             echo: Callable[[str], None] | None = print) -> list[JobResult]:
+             echo: Callable[[str], None] | None = print,
+             on_result: Callable[[JobResult], None] | None = None) -> list[JobResult]:
     """Run ``jobs``; return their results in the order given. ``echo`` gets one progress line per
-    finished job: jobs done / total, the job's time and the estimated time left."""
+    finished job: jobs done / total, the job's time and the estimated time left; ``on_result`` gets
+    each finished job's result (successful or failed after its retries) as it comes, in this process.
+    SIGINT or SIGTERM raise :class:`Interrupted` once every worker is stopped."""
     if executor not in EXECUTORS:
         raise ValueError(f"executor={executor!r}; choose from {list(EXECUTORS)}")
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or not 1 <= n_jobs <= 4096:
@@ -83,20 +129,21 @@ def run_jobs(jobs: Sequence[Job], executor: str = "local", n_jobs: int = 1, retr
     keys = [job.key for job in jobs]
     if len(set(keys)) != len(keys):
         raise ValueError("job keys must be unique; repeated: " + ", ".join(sorted({k for k in keys if keys.count(k) > 1})))
-    progress = _Progress(len(jobs), echo)
-    if executor == "ray":
-        return _run_ray(jobs, n_jobs, retries, progress)
-    if n_jobs == 1:
-        results = []
-        for job in jobs:
-            for attempt in range(1, retries + 2):
-                result = _attempt(job.key, job.fn, job.args)
-                result.attempts = attempt
-                if result.ok:
-                    break
-            results.append(progress.done(result))
-        return results
-    return _run_pool(jobs, n_jobs, retries, progress)
+    progress = _Progress(len(jobs), echo, on_result)
+    with stop_on_signals():
+        if executor == "ray":
+            return _run_ray(jobs, n_jobs, retries, progress)
+        if n_jobs == 1:
+            results = []
+            for job in jobs:
+                for attempt in range(1, retries + 2):
+                    result = _attempt(job.key, job.fn, job.args)
+                    result.attempts = attempt
+                    if result.ok:
+                        break
+                results.append(progress.done(result))
+            return results
+        return _run_pool(jobs, n_jobs, retries, progress)
 
 
 def pin_threads() -> None:
@@ -119,12 +166,28 @@ def _attempt(key: str, fn: Callable[..., Any], args: tuple) -> JobResult:
     return JobResult(key, value, wall_s=time.perf_counter() - t0)
 
 
+def _watch_parent(parent: int, stop: Any) -> None:
+    """A local worker's start: Ctrl-C is the parent's to handle; the worker ends itself at once when its
+    parent is gone (killed, even by SIGKILL: it is then re-parented) or asks it to stop."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def watch() -> None:
+        while os.getppid() == parent and not stop.wait(PARENT_POLL_S):
+            pass
+        os._exit(1)                    # no cleanup to run: the job's files are committed by rename or not at all
+
+    threading.Thread(target=watch, name="softenv-watch-parent", daemon=True).start()
+
+
 def _run_pool(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progress") -> list[JobResult]:
     pin_threads()                      # inherited by the spawned workers before they load BLAS
     results: list[JobResult | None] = [None] * len(jobs)
     attempts = [0] * len(jobs)
-    with ProcessPoolExecutor(max_workers=min(n_jobs, max(len(jobs), 1)),
-                             mp_context=multiprocessing.get_context("spawn")) as pool:
+    context = multiprocessing.get_context("spawn")
+    stop = context.Event()
+    pool = ProcessPoolExecutor(max_workers=min(n_jobs, max(len(jobs), 1)), mp_context=context,
+                               initializer=_watch_parent, initargs=(os.getpid(), stop))
+    try:
         def submit(i: int) -> Future:
             attempts[i] += 1
             future = pool.submit(_attempt, jobs[i].key, jobs[i].fn, jobs[i].args)
@@ -145,6 +208,11 @@ def _run_pool(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progre
                     continue
                 result.attempts = attempts[i]
                 results[i] = progress.done(result)
+    except BaseException:
+        stop.set()                     # each worker ends itself within PARENT_POLL_S; the pool then reaps them
+        pool.shutdown(cancel_futures=True)
+        raise
+    pool.shutdown()
     return [r for r in results if r is not None]
 
 
@@ -185,6 +253,11 @@ def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progres
                     continue
                 result.attempts = attempts[i]
                 results[i] = progress.done(result)
+    except BaseException:
+        if not started_here:           # a shared cluster: cancel this run's tasks (a local instance just ends)
+            for ref in pending:
+                ray.cancel(ref, force=True)
+        raise
     finally:
         if started_here:
             ray.shutdown()
@@ -192,11 +265,14 @@ def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progres
 
 
 class _Progress:
-    def __init__(self, total: int, echo: Callable[[str], None] | None) -> None:
-        self.total, self.count, self.echo = total, 0, echo
+    def __init__(self, total: int, echo: Callable[[str], None] | None,
+                 on_result: Callable[[JobResult], None] | None = None) -> None:
+        self.total, self.count, self.echo, self.on_result = total, 0, echo, on_result
         self.start = time.perf_counter()
 
     def done(self, result: JobResult) -> JobResult:
+        if self.on_result is not None:
+            self.on_result(result)
         self.count += 1
         if self.echo is not None:
             elapsed = time.perf_counter() - self.start

@@ -103,51 +103,85 @@ def test_agent_file_is_checked_against_the_scene(tmp_path):
     with pytest.raises(ValueError, match="trained for scene 'SoftSphere-v0'.*asked for scene 'SoftSphereViscoelastic-v0'"):
         load_agent(path, "SoftSphereViscoelastic-v0")
     meta = json.loads((tmp_path / "ppo" / "agent.json").read_text())
-    (tmp_path / "ppo" / "agent.json").write_text(json.dumps({**meta, "resumed_at": [100, "x"]}))
-    with pytest.raises(ValueError, match=r"resumed_at=\[100, 'x'\]; expected a list of env steps"):
-        load_agent(path, "SoftSphere-v0")
     meta["format_version"] = 99
     (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="format_version=99"):
         load_agent(path, "SoftSphere-v0")
+    meta["format_version"] = 2
+    (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
+    with path.open("ab") as fh:                   # a model that is not the one trained: refused
+        fh.write(b"\0")
+    with pytest.raises(ValueError, match="does not match model_sha256"):
+        load_agent(path, "SoftSphere-v0")
 
 
-def _last_checkpoint(out) -> int:
-    return max(int(p.stem.split("_")[1]) for p in out.glob("checkpoints/agent_*_steps.zip"))
+def _weights(path) -> list[np.ndarray]:
+    policy = load_agent(path, "SoftSphere-v0")
+    return [p.detach().numpy().copy() for p in policy.model.policy.parameters()]
 
 
-def test_training_resumes_from_its_last_checkpoint_and_records_it(tmp_path):
-    out = tmp_path / "sac"
-    resumed_at = lambda: json.loads((out / "agent.json").read_text())["resumed_at"]  # noqa: E731
-    path = train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
-    assert resumed_at() == []
-    path.unlink()
-    first = _last_checkpoint(out)
-    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1600, progress=False)
-    log = (out / "logs" / "progress.csv").read_text().splitlines()
-    assert path.exists() and len(log) > 1
-    assert resumed_at() == [first] and load_agent(path, "SoftSphere-v0").resumed_at == [first]
-    # stopped once more: both sittings are listed, in order
-    path.unlink()
-    second = _last_checkpoint(out)
-    assert second > first
-    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=2000, progress=False)
-    assert resumed_at() == [first, second]
-    # trained from scratch again: nothing was resumed
-    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False, resume=False)
-    assert resumed_at() == [] and not (out / "checkpoints" / "resumed_at.json").exists()
+def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(tmp_path):
+    whole = train_agent("sac", "SoftSphere-v0", 0, tmp_path / "whole", timesteps=1100, progress=False)
+    out = tmp_path / "stopped"
+    partial = tmp_path / "stopped.partial"           # what a run killed mid-training leaves
+    (partial / "eval").mkdir(parents=True)
+    (partial / "model.zip").write_bytes(b"PK\3\4 truncated")
+    out.mkdir()
+    (out / "model.zip").write_bytes(b"not a model")  # and a foreign entry where the run goes: no agent.json
+    path = train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1100, progress=False)
+    assert not partial.exists() and sorted(p.name for p in out.iterdir()) == [
+        "agent.json", "best", "eval", "logs", "model.zip"]
+    for a, b in zip(_weights(whole), _weights(path), strict=True):
+        np.testing.assert_array_equal(a, b)          # bit for bit the run that was never stopped
+    # a finished run is reused; one of another budget is replaced by a fresh run
+    stamp = path.stat().st_mtime_ns
+    assert train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1100, progress=False) == path
+    assert path.stat().st_mtime_ns == stamp
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
+    assert json.loads((out / "agent.json").read_text())["timesteps"] == 1200
 
 
-def test_compare_names_the_agent_seeds_it_resumed(tmp_path):
-    plan = Plan(["SoftSphere-v0"], ["zero"], ["sac"], {"SoftSphere-v0": 2}, {"sac": 1100}, episodes=4)
+def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monkeypatch):
+    from baselines.run_store import RunStore
+    from softenv.parallel import Interrupted
+
+    plan = Plan(["SoftSphere-v0"], ["zero", "direct-poly3"], ["sac"], {"SoftSphere-v0": 2}, {"sac": 1100}, episodes=4)
     quiet = lambda s: None  # noqa: E731
-    first = run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet, write=False)
-    assert first[1]["kind"] == "agent (1,100 steps)" and first[1]["resumed_seeds"] == []
-    (model,) = (tmp_path / "runs").glob("**/sac-1/model.zip")
-    model.unlink()                                # seed 1 stopped after its last checkpoint
-    again = run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet)
-    assert again[1]["kind"] == "agent (1,100 steps; seed 1 resumed)" and again[1]["resumed_seeds"] == [1]
-    assert "not bit for bit the run from scratch" in (tmp_path / "benchmark.md").read_text()
+    whole = run(plan, tmp_path, tmp_path / "whole", "test", echo=quiet, write=False)
+    assert whole[2]["kind"] == "agent (1,100 steps)"
+    save = RunStore.save
+
+    def stop_after_two(self, job, result):        # SIGTERM arrives after the second job is kept
+        save(self, job, result)
+        if self.count() == 2:
+            raise Interrupted(15)
+
+    monkeypatch.setattr(RunStore, "save", stop_after_two)
+    with pytest.raises(Interrupted) as stopped:
+        run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet, write=False)
+    assert "2 finished jobs are kept" in stopped.value.kept and stopped.value.exit_status == 143
+    monkeypatch.setattr(RunStore, "save", save)
+    lines: list[str] = []
+    again = run(plan, tmp_path, tmp_path / "runs", "test", echo=lines.append, write=False)
+    assert "resuming: 2 of 5 jobs" in "\n".join(lines)
+    assert _cells(again) == _cells(whole)
+    # a damaged entry and one made by other settings are redone, never read
+    entries = sorted((tmp_path / "runs" / "jobs").glob("*.npz"))
+    assert len(entries) == 5
+    entries[0].write_bytes(entries[0].read_bytes()[:100])
+    lines.clear()
+    third = run(plan, tmp_path, tmp_path / "runs", "test", echo=lines.append, write=False)
+    assert sum("is not used (unreadable" in line for line in lines) == 1 and "resuming: 4 of 5 jobs" in "\n".join(lines)
+    assert _cells(third) == _cells(whole)
+    plan.episodes = 5
+    lines.clear()
+    run(plan, tmp_path, tmp_path / "runs", "test", echo=lines.append, write=False)
+    assert sum("made by other settings or other code" in line for line in lines) == 5
+
+
+def _cells(summaries: list[dict]) -> str:
+    """Every number but the measured decision times, as text (NaN equals NaN there, bit for bit otherwise)."""
+    return json.dumps([{k: v for k, v in s.items() if k != "decision_us"} for s in summaries], sort_keys=True)
 
 
 def test_compare_writes_the_report_with_its_command(tmp_path):
