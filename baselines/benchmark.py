@@ -142,12 +142,12 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
 
     _torch_single_thread()
     path = Path(run_dir) / "ppo-torch.pt"
-    if path.exists():
-        agent = ppo_torch.load(path, scene)
-    else:
-        args = ppo_torch.Args(scene=scene, seed=seed, device=torch_device())
-        if budget is not None:
-            args.total_timesteps = budget
+    args = ppo_torch.Args(scene=scene, seed=seed, device=torch_device())
+    if budget is not None:
+        args.total_timesteps = budget
+    try:
+        agent = ppo_torch.load(path, scene, args)
+    except Exception:  # noqa: BLE001 - none yet, of other settings, or damaged (torch's errors vary): train it
         agent, _ = ppo_torch.train(args, log=lambda line: None)
         path.parent.mkdir(parents=True, exist_ok=True)
         ppo_torch.save(agent, args, path)

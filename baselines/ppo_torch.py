@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -38,14 +39,15 @@ import torch
 from torch import nn
 
 import softenv  # noqa: F401  (registers the ids)
+from softenv._artifact import atomic_write
 from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.torch_twin import usable_device
-from softenv.parallel import Job, describe, run_jobs
+from softenv.parallel import Interrupted, Job, describe, run_jobs
 
 from .anchors import anchor_job
 from .evaluate import SCENES, bootstrap_ci, evaluate, normalized_scores, scene_kwargs
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2                # 2: the seed and budget it was trained with
 
 
 @dataclass
@@ -243,17 +245,23 @@ class TorchPolicy:
 
 
 def save(agent: Agent, args: Args, path: Path) -> None:
-    """Weights and the statistics of the observation normaliser, plain tensors (safe to load)."""
-    torch.save({"format_version": FORMAT_VERSION, "scene": args.scene, "hidden": list(args.hidden),
-                "state_dict": agent.state_dict()}, path)
+    """Weights and the statistics of the observation normaliser, plain tensors (safe to load), written
+    by rename (a stop leaves the old file or the new one)."""
+    payload = {"format_version": FORMAT_VERSION, "scene": args.scene, "hidden": list(args.hidden),
+               "seed": args.seed, "total_timesteps": args.total_timesteps, "state_dict": agent.state_dict()}
+    atomic_write(path, lambda fh: torch.save(payload, fh))
 
 
-def load(path: Path, scene: str) -> Agent:
+def load(path: Path, scene: str, args: Args | None = None) -> Agent:
+    """The agent saved at ``path`` for ``scene``; with ``args``, also of their seed and budget."""
     data = torch.load(path, weights_only=True, map_location="cpu")
     if data.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{str(path)!r}: format_version={data.get('format_version')!r}; expected {FORMAT_VERSION}")
     if data.get("scene") != scene:
         raise ValueError(f"{str(path)!r} was trained on scene {data.get('scene')!r}, not {scene!r}")
+    if args is not None and (data.get("seed"), data.get("total_timesteps")) != (args.seed, args.total_timesteps):
+        raise ValueError(f"{str(path)!r} was trained with seed {data.get('seed')!r} for {data.get('total_timesteps')!r} "
+                         f"steps, not seed {args.seed} for {args.total_timesteps}")
     weights = data["state_dict"]
     agent = Agent(weights["norm.mean"].shape[0], 4, data["hidden"], 0.0)
     agent.load_state_dict(weights)
@@ -300,7 +308,13 @@ def main(argv: list[str] | None = None) -> None:
                                                 update_epochs=a.update_epochs, compile_env=a.compile_env,
                                                 normalize_obs=not a.no_normalize_obs), a.episodes, a.out))
             for seed in a.seeds]
-    results = run_jobs(jobs, "local", a.jobs)
+    try:
+        results = run_jobs(jobs, "local", a.jobs)
+    except Interrupted as stop:
+        where = f"seeds that finished have their weights in {a.out}" if a.out else "no weights kept (no --out)"
+        print(f"ppo_torch: stopped by {signal.Signals(stop.signum).name}; {where}; a rerun trains every seed again",
+              file=sys.stderr)
+        raise SystemExit(stop.exit_status) from None
     failed = [r for r in results if not r.ok]
     if failed:
         raise SystemExit("; ".join(f"{r.key}: {r.error}" for r in failed))
@@ -319,14 +333,14 @@ def main(argv: list[str] | None = None) -> None:
     print("\n".join(lines) + "\n\n" + summary)
     if a.report is not None:
         machine = machine_info()
-        a.report.parent.mkdir(parents=True, exist_ok=True)
-        a.report.write_text("\n".join([
+        report = "\n".join([
             "# PPO on the torch twin (`baselines/ppo_torch.py`)\n",
             f"Made by `{command}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {machine['cpu']}, "
             f"{machine['logical_cores']} cores, one torch thread per seed, {describe('local', a.jobs)}; torch {torch.__version__}).\n",
             "Protocol as `softenv compare`: test targets, normalized score against the scene's anchors "
             "(0 = no force, 100 = the planning oracle). Each seed trains on `gym.make_vec(..., backend=\"torch\")` "
-            f"(float32, same-step autoreset, {a.target_draw} target draw) and is evaluated on the numpy twin.\n", *lines, "", summary, ""]))
+            f"(float32, same-step autoreset, {a.target_draw} target draw) and is evaluated on the numpy twin.\n", *lines, "", summary, ""])
+        atomic_write(a.report, lambda fh: fh.write(report), text=True)
 
 
 if __name__ == "__main__":

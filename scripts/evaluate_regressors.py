@@ -20,6 +20,7 @@ import os
 import sys
 import tempfile
 import time
+from typing import Any
 from pathlib import Path
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -29,6 +30,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from softenv._artifact import atomic_write, save_figure, write_text  # noqa: E402
 from softenv._progress import Progress  # noqa: E402
 from softenv.bench.timing import code_revision, measure  # noqa: E402
 from softenv.datasets import paper_dataset, split_by_contact, split_rows  # noqa: E402
@@ -154,11 +156,13 @@ def main() -> None:
                         keep[name] = (data, split, shape_model, pred)
             bar.advance(note=f"{law} {pts} seed {seed}")
 
-    with open(out / "error_vs_runtime.csv", "w", newline="") as fh:
+    def write_csv(fh: Any) -> None:
         writer = csv.DictWriter(fh, fieldnames=FIELDS)
         writer.writeheader()
         for r in rows:
             writer.writerow({k: r[k] for k in FIELDS})
+
+    atomic_write(out / "error_vs_runtime.csv", write_csv, text=True)
 
     # error against run time, one panel per scene
     fig, axes = plt.subplots(2, 2, figsize=(11, 8.5))
@@ -187,7 +191,7 @@ def main() -> None:
     axes[0, 0].legend(fontsize=7, ncol=2, title="filled: random rows; open: held-out contacts; line: PCA with k comps",
                       title_fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "error_vs_runtime.png", dpi=110)
+    save_figure(fig, out / "error_vs_runtime.png", dpi=110)
     plt.close(fig)
 
     # figures like the paper's 4.6/4.8 (desired and estimated b) and 4.7/4.9 (reconstructions)
@@ -204,7 +208,7 @@ def main() -> None:
         fig.suptitle(f"Desired and estimated shape parameters, {name} (cf. the paper's Fig. {fig_ids[0].replace('_', '.')})",
                      fontsize=9)
         fig.tight_layout()
-        fig.savefig(out / f"regressors_fig{fig_ids[0]}_{name}_b.png", dpi=110)
+        save_figure(fig, out / f"regressors_fig{fig_ids[0]}_{name}_b.png", dpi=110)
         plt.close(fig)
         i = int(np.argmax(np.abs(b_true).sum(1)))
         rest = data.mesh.vertices
@@ -216,7 +220,7 @@ def main() -> None:
                          view=View(40, -60), vmin=0, vmax=0.003, title=title)
         fig.suptitle(f"Reconstructions (cf. Fig. {fig_ids[1].replace('_', '.')}); displacements x3", fontsize=9)
         fig.tight_layout()
-        fig.savefig(out / f"regressors_fig{fig_ids[1]}_{name}_surfaces.png", dpi=110)
+        save_figure(fig, out / f"regressors_fig{fig_ids[1]}_{name}_surfaces.png", dpi=110)
         plt.close(fig)
 
     # the paper's net at k <= 9: a four-deformation model (the paper's figures used few components)
@@ -278,7 +282,7 @@ def main() -> None:
            "![ANFIS b](regressors_fig4_6_anfis_b.png)", "", "![ANFIS surfaces](regressors_fig4_7_anfis_surfaces.png)", "",
            "![MLP b](regressors_fig4_8_mlp_b.png)", "", "![MLP surfaces](regressors_fig4_9_mlp_surfaces.png)", "",
            f"_Python {sys.version.split()[0]}; raw numbers: `error_vs_runtime.csv`._", ""]
-    (out / "regressors.md").write_text("\n".join(md))
+    write_text(out / "regressors.md", "\n".join(md))
     print(f"wrote {out / 'regressors.md'}")
 
 

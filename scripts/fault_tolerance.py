@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from softenv._artifact import write_text
+
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ["compare", "--quick", "--jobs", "2"]
 SMOKE = ["compare", "--scenes", "SoftSphere-v0", "--policies", "zero", "random", "direct-poly3", "--agents",
@@ -232,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
     summary = {"command": command, "compare": "softenv " + " ".join(args), "reference_s": round(run_s, 1),
                "trials": records, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "fault_tolerance.json").write_text(json.dumps(summary, indent=1) + "\n")
+    write_text(a.out / "fault_tolerance.json", json.dumps(summary, indent=1) + "\n")
     lines = ["# Fault tolerance: `softenv compare` stopped and resumed\n",
              f"Made by `{command}` ({summary['date']}). Each trial runs `{summary['compare']}` (the uninterrupted "
              f"reference took {run_s:.0f} s), stops it, runs the same command again, and compares the table with the "
@@ -250,7 +252,7 @@ def main(argv: list[str] | None = None) -> None:
     stopped = [r for r in records if r.get("stop_line")]
     if stopped:
         lines += ["", "What a stopped run said (SIGTERM, SIGINT):", "", *sorted({f"    {r['stop_line']}" for r in stopped})]
-    (a.out / "fault_tolerance.md").write_text("\n".join(lines) + "\n")
+    write_text(a.out / "fault_tolerance.md", "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
+from softenv._artifact import write_text  # noqa: E402
 import softenv  # noqa: E402,F401  (registers the ids)
 from softenv.bench.timing import code_revision, paired_step_ratios  # noqa: E402
 from softenv.response import REGRESSORS  # noqa: E402
@@ -67,7 +68,7 @@ def main() -> None:
         f"Made by `python {' '.join(sys.argv)}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).", ""])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "fem_scene.md").write_text(text)
+    write_text(out / "fem_scene.md", text)
     print(text)
 
 

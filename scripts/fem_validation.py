@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softenv._artifact import save_figure, write_text
 from softenv.datasets import paper_dataset, split_by_contact, split_rows
 from softenv.fem.data import fe_paper_dataset
 from softenv.fem.tongue import FEParams, FETongue
@@ -163,7 +164,7 @@ def main() -> None:
     lines += [f"Made by `{command}` at {code_revision()} in {time.perf_counter() - started:.0f} s "
               f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}); plot: `fem_indentation.png`.", ""]
     Path(args.out).mkdir(parents=True, exist_ok=True)
-    (Path(args.out) / "fem.md").write_text("\n".join(lines))
+    write_text(Path(args.out) / "fem.md", "\n".join(lines))
     print("\n".join(lines))
 
 
@@ -238,7 +239,7 @@ def _plot_error_vs_runtime(path: Path, models: list[str], mean) -> None:
                 Line2D([], [], ls="", marker="o", markerfacecolor="none", color="k", label="961 points")]
     fig.legend(handles=handles, loc="center right", fontsize=7, frameon=False)
     fig.tight_layout(rect=(0, 0, 0.84, 1))
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -255,7 +256,7 @@ def _plot(path: Path, forces: np.ndarray, fe_depth: np.ndarray, curves: dict[str
     ax.set_ylabel("indentation of the top (mm)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

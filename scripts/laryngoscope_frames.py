@@ -16,6 +16,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from softenv._artifact import save_figure, write_text
 import softenv  # noqa: E402,F401  (registers the ids)
 from softenv.bench.timing import code_revision  # noqa: E402
 
@@ -46,8 +47,8 @@ def main() -> None:
     fig.tight_layout()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out / "laryngoscope_frames.png")
-    (out / "laryngoscope_frames.txt").write_text("made by: python scripts/laryngoscope_frames.py --out "
+    save_figure(fig, out / "laryngoscope_frames.png")
+    write_text(out / "laryngoscope_frames.txt", "made by: python scripts/laryngoscope_frames.py --out "
                                                  f"{args.out} at {code_revision()}\n" + "\n".join(captions) + "\n")
     print(f"wrote {out / 'laryngoscope_frames.png'}")
 

@@ -44,16 +44,23 @@ def main() -> None:
     if args.fresh:
         os.environ["SOFTENV_CACHE_DIR"] = tempfile.mkdtemp(prefix="softenv-fem-")   # before softenv reads it
 
+    from softenv._artifact import atomic_write
     from softenv.bench.timing import code_revision
     from softenv.envs import ENV_SCENES, HAPTIC_SCENES
     from softenv.envs.config import scene_config
     from softenv.envs.scene import fe_request
     from softenv.fem.data import fe_scene_data
+    from softenv.parallel import Interrupted
 
     config = scene_config({**ENV_SCENES, **HAPTIC_SCENES}[args.env_id], {"tissue": {"model": "fem"}})
     request = fe_request(config)
     started = time.perf_counter()
-    data = fe_scene_data(request, jobs=args.jobs, executor=args.executor)
+    try:
+        data = fe_scene_data(request, jobs=args.jobs, executor=args.executor)
+    except Interrupted as stop:
+        print(f"make_fem_data: stopped by {stop}; every ramp solved so far is cached; run the same command to resume",
+              file=sys.stderr)
+        raise SystemExit(stop.exit_status) from None
     seconds = time.perf_counter() - started
     path = Path(args.out) / f"{args.env_id}.npz"
     data.save(path)
@@ -73,8 +80,7 @@ def main() -> None:
             f"{' from an empty cache' if args.fresh else ''} on {os.cpu_count()} cores; `{path}` is "
             f"{size / 1e6:.1f} MB; array sha256 `{array_digest(path)}`.\n\n"
             f"Made by `python {' '.join(sys.argv)}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
-    Path(args.report).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.report).write_text(text)
+    atomic_write(Path(args.report), lambda fh: fh.write(text), text=True)
     print(text)
 
 

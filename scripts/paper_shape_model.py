@@ -27,6 +27,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.datasets import paper_dataset  # noqa: E402
 from softenv.geometry import interpolate_latlong  # noqa: E402
 from softenv.render import View, draw_surface  # noqa: E402
@@ -128,7 +129,7 @@ def main() -> None:
     ax.set_title("stiffening law, 10 deformations, 961 points", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "paper_nonlinear_error_vs_k.png", dpi=120)
+    save_figure(fig, out / "paper_nonlinear_error_vs_k.png", dpi=120)
     plt.close(fig)
 
     # 5a. scree plots
@@ -143,7 +144,7 @@ def main() -> None:
         ax.set_title(f"{law} law, 961 points", fontsize=9)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "paper_scree.png", dpi=120)
+    save_figure(fig, out / "paper_scree.png", dpi=120)
     plt.close(fig)
 
     # 5b. Fig. 4.1: components 1-3 of a four-deformation model, each varied over its data range
@@ -163,7 +164,7 @@ def main() -> None:
     fig.suptitle(f"Components 1-3 of a four-deformation model (cf. the paper's Fig. 4.1); "
                  f"displacements x{EXAGGERATE:g}", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out / "paper_fig4_1_components.png", dpi=110)
+    save_figure(fig, out / "paper_fig4_1_components.png", dpi=110)
     plt.close(fig)
 
     # 5c. Fig. 4.2: a complex shape combining the ten deformations
@@ -179,7 +180,7 @@ def main() -> None:
     fig.suptitle("Ten deformations combined, rebuilt from 10 shape parameters (cf. Fig. 4.2); "
                  f"displacements x{EXAGGERATE:g}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "paper_fig4_2_complex.png", dpi=110)
+    save_figure(fig, out / "paper_fig4_2_complex.png", dpi=110)
     plt.close(fig)
     err = np.sqrt(np.mean((m.decode(b) - combined) ** 2)) / R
     md += ["## 5. Figures", "", "![scree](paper_scree.png)", "",
@@ -190,7 +191,7 @@ def main() -> None:
            "![complex shape](paper_fig4_2_complex.png)", "",
            f"_Generated in {time.perf_counter() - started:.0f} s with numpy {np.__version__}, "
            f"Python {sys.version.split()[0]}._", ""]
-    (out / "paper_shape_model.md").write_text("\n".join(md))
+    write_text(out / "paper_shape_model.md", "\n".join(md))
     print(f"wrote {out / 'paper_shape_model.md'}")
 
 

@@ -20,6 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from softenv._artifact import write_text
+
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = {"one process (--jobs 1)": ["--jobs", "1"], "2 local workers (--jobs 2)": ["--jobs", "2"],
         "local Ray, 2 CPUs (--executor ray --jobs 2)": ["--executor", "ray", "--jobs", "2"]}
@@ -82,7 +84,7 @@ def main() -> None:
               "Identical results (every table cell except the measured decision times):", "",
               f"- 2 local workers against one process: {'yes' if cells(rep2) == cells(rep1) else '**no**'}",
               f"- Ray against one process: {'yes' if cells(rep_ray) == cells(rep1) else '**no**'}"]
-    (ROOT / "results" / "scaleout.md").write_text("\n".join(lines) + "\n")
+    write_text(ROOT / "results" / "scaleout.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     if not cells(rep2) == cells(rep1) == cells(rep_ray):
         sys.exit(1)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softenv._artifact import write_text
 from softenv.training.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log
 from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
 from softenv.bench.timing import code_revision
@@ -71,7 +72,7 @@ def main() -> None:
           *single, ""]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "scoring_validity.md").write_text("\n".join(md))
+    write_text(out / "scoring_validity.md", "\n".join(md))
     print("\n".join(md))
 
 

@@ -31,6 +31,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from softenv._artifact import write_text
 import softenv  # noqa: F401
 from softenv.tissue import AnalyticTissue
 from softenv.bench.timing import code_revision
@@ -281,7 +282,7 @@ def main() -> None:
         print(lines[-1], flush=True)
     table, hostile_ok = input_classes()
     lines += table
-    (ROOT / "results" / "stability.md").write_text("\n".join(lines) + "\n")
+    write_text(ROOT / "results" / "stability.md", "\n".join(lines) + "\n")
     if not healthy or not hostile_ok:
         raise SystemExit("some case was not finite, valid, reproducible or refused as documented: see "
                          "results/stability.md")

@@ -46,6 +46,16 @@ def atomic_write(path: str | os.PathLike, write: Writer, text: bool = False) -> 
     return atomic_write_all([(Path(path), write, text)])[0]
 
 
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """:func:`atomic_write` of a text file."""
+    return atomic_write(path, lambda handle: handle.write(text), text=True)
+
+
+def save_figure(fig: Any, path: str | os.PathLike, **savefig: Any) -> Path:
+    """:func:`atomic_write` of a matplotlib figure, in the format its suffix names."""
+    return atomic_write(path, lambda handle: fig.savefig(handle, format=Path(path).suffix[1:], **savefig))
+
+
 def atomic_write_all(files: list[tuple[Path, Writer, bool]]) -> list[Path]:
     """Write a set of files (path, ``write(handle)``, text) all or nothing: each into a temporary file
     beside it, then, once every write has succeeded, each renamed into place; a failed write removes the
