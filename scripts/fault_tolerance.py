@@ -35,29 +35,13 @@ from typing import Any
 import numpy as np
 
 from softenv._artifact import write_text
+from softenv.bench.timing import code_revision
+from softenv.parallel import descendants
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ["compare", "--quick", "--jobs", "2"]
 SMOKE = ["compare", "--scenes", "SoftSphere-v0", "--policies", "zero", "random", "direct-poly3", "--agents",
          "--episodes", "8", "--jobs", "2"]
-
-
-def descendants(pid: int) -> set[int]:
-    """Every living descendant of ``pid`` (Linux ``/proc``)."""
-    found: set[int] = set()
-    todo = [pid]
-    while todo:
-        parent = todo.pop()
-        for task in Path(f"/proc/{parent}/task").glob("*"):
-            try:
-                children = (task / "children").read_text().split()
-            except OSError:
-                continue
-            for child in map(int, children):
-                if child not in found:
-                    found.add(child)
-                    todo.append(child)
-    return found
 
 
 def alive(pid: int) -> bool:
@@ -231,12 +215,13 @@ def main(argv: list[str] | None = None) -> None:
         records.append(record)
         print(json.dumps(record), flush=True)
     command = "python scripts/fault_tolerance.py " + " ".join(sys.argv[1:] if argv is None else argv)
-    summary = {"command": command, "compare": "softenv " + " ".join(args), "reference_s": round(run_s, 1),
+    summary = {"command": command, "code": code_revision(), "compare": "softenv " + " ".join(args),
+               "reference_s": round(run_s, 1),
                "trials": records, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     a.out.mkdir(parents=True, exist_ok=True)
     write_text(a.out / "fault_tolerance.json", json.dumps(summary, indent=1) + "\n")
     lines = ["# Fault tolerance: `softenv compare` stopped and resumed\n",
-             f"Made by `{command}` ({summary['date']}). Each trial runs `{summary['compare']}` (the uninterrupted "
+             f"Made by `{command}` at {summary['code']} ({summary['date']}, {os.cpu_count()} cores). Each trial runs `{summary['compare']}` (the uninterrupted "
              f"reference took {run_s:.0f} s), stops it, runs the same command again, and compares the table with the "
              "reference's: every column but the measured decision time. *Outlived*: how long after the stop the last "
              "process the run had started still ran (SIGKILL gives the parent no chance to act: its workers see it "

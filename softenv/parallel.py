@@ -28,12 +28,14 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import subprocess
 import sys
 import threading
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 EXECUTORS = ("local", "ray")
@@ -226,6 +228,9 @@ def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progres
         env = {"env_vars": {name: "1" for name in THREAD_VARS}}
         local: dict[str, Any] = {} if os.environ.get("RAY_ADDRESS") else {"num_cpus": n_jobs, "include_dashboard": False}
         ray.init(runtime_env=env, log_to_driver=False, **local)
+    # a local instance's own services would outlive a killed driver by a minute or more (its agents
+    # wait on the dead head node): a watcher kills them the moment this process is gone
+    reaper = _start_reaper() if started_here and not os.environ.get("RAY_ADDRESS") else None
     # _attempt catches the job's exception, so retry here on a failed result; Ray itself retries a task
     # whose worker or node died (max_retries)
     task = ray.remote(num_cpus=1, max_retries=retries)(_attempt)
@@ -261,7 +266,58 @@ def _run_ray(jobs: Sequence[Job], n_jobs: int, retries: int, progress: "_Progres
     finally:
         if started_here:
             ray.shutdown()
+        if reaper is not None:
+            reaper.kill()
+            reaper.wait()
     return [r for r in results if r is not None]
+
+
+def descendants(pid: int) -> set[int]:
+    """The living descendants of ``pid`` (Linux ``/proc``; elsewhere none are known)."""
+    found: set[int] = set()
+    todo = [pid]
+    while todo:
+        for task in Path(f"/proc/{todo.pop()}/task").glob("*"):
+            try:
+                children = set(map(int, (task / "children").read_text().split()))
+            except OSError:
+                continue
+            todo += children - found
+            found |= children
+    return found
+
+
+def start_time(pid: int) -> str | None:
+    """When ``pid`` started (clock ticks since boot, Linux): with the pid, a process's identity."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return None
+
+
+_REAPER = """
+import os, signal, sys, time
+parent, marks = int(sys.argv[1]), [m.split(":") for m in sys.argv[2:]]
+while os.getppid() == parent:
+    time.sleep(0.2)
+for pid, started in marks:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            if f.read().rsplit(")", 1)[1].split()[19] == started:
+                os.kill(int(pid), signal.SIGKILL)
+    except (OSError, IndexError):
+        pass
+"""
+
+
+def _start_reaper() -> subprocess.Popen | None:
+    """A process that kills this process's present descendants (by pid and start time, so a reused
+    pid is spared) once this process is gone; ``None`` where ``/proc`` is not there to tell."""
+    marks = [f"{pid}:{started}" for pid in sorted(descendants(os.getpid())) if (started := start_time(pid))]
+    if not marks:
+        return None
+    return subprocess.Popen([sys.executable, "-c", _REAPER, str(os.getpid()), *marks], start_new_session=True,
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 class _Progress:

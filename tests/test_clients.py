@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -230,6 +231,15 @@ def _fail_once(marker: str, value: int) -> int:
     return value
 
 
+def _die_once(marker: str, value: int) -> int:
+    """Kills its own worker process on its first call (as a lost machine would); returns on the retry."""
+    path = Path(marker)
+    if not path.exists():
+        path.write_text("killed")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return value
+
+
 def _always_fail(value: int) -> int:
     raise ValueError(f"bad job {value}")
 
@@ -314,6 +324,18 @@ def test_ray_executor_retries_and_reports_failures(tmp_path):
     results = run_jobs(_jobs(tmp_path, "ray"), "ray", 2, retries=1, echo=None)
     assert [r.value for r in results if r.ok] == [9, 7, 16]
     assert results[1].attempts == 2 and not results[2].ok and results[2].attempts == 2
+
+
+def test_a_ray_worker_killed_mid_job_is_run_again_by_ray(tmp_path):
+    ray = pytest.importorskip("ray")
+    from softenv.parallel import Job, run_jobs
+
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    os.environ.pop("RAY_ADDRESS", None)
+    jobs = [Job("a", _square, (3,)), Job("killed", _die_once, (str(tmp_path / "marker"), 7)), Job("b", _square, (4,))]
+    results = run_jobs(jobs, "ray", 2, retries=1, echo=None)
+    assert (tmp_path / "marker").read_text() == "killed"          # its first worker did die
+    assert [r.value for r in results] == [9, 7, 16] and all(r.ok for r in results)
 
 
 def test_softenv_data_over_two_workers_writes_the_same_data_sets(tmp_path, capsys):
