@@ -176,21 +176,28 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     store = RunStore(runs_dir)
     results: dict[str, JobResult] = {}
     for job in grid:
-        kept, why = store.load(job)
-        if kept is not None:
-            results[job.key] = kept
+        stored, why = store.load(job)
+        if stored is not None:
+            results[job.key] = stored
         elif why != "absent":
             echo(f"{job.key}: its entry in {store.dir} is not used ({why}); the job runs again")
     if results:
         echo(f"resuming: {len(results)} of {len(grid)} jobs were finished by an earlier run ({store.dir})")
     todo = [job for job in grid if job.key not in results]
     by_key = {job.key: job for job in todo}
+    kept = list(results)
+
+    def keep(result: JobResult) -> None:
+        store.save(by_key[result.key], result)
+        if result.ok:
+            kept.append(result.key)
+
     try:
-        for r in run_jobs(todo, executor, n_jobs, retries, echo, on_result=lambda r: store.save(by_key[r.key], r)):
+        for r in run_jobs(todo, executor, n_jobs, retries, echo, on_result=keep):
             results[r.key] = r
     except Interrupted as exc:
-        exc.kept = (f"{store.count()} finished jobs are kept in {store.dir} (trained agents beside it); "
-                    "run the same command to resume")
+        exc.kept = (f"{len(kept)} of {len(grid)} jobs are finished and kept in {store.dir} (trained agents beside "
+                    "it); run the same command to resume")
         raise
     reused = len(grid) - len(todo)
     summaries: list[dict[str, Any]] = []

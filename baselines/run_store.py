@@ -83,9 +83,6 @@ class RunStore:
                       {"key": job.key, "fingerprint": self.fingerprint(job), "value": tree,
                        "attempts": result.attempts, "wall_s": result.wall_s})
 
-    def count(self) -> int:
-        return len(list(self.dir.glob("*.npz"))) if self.dir.is_dir() else 0
-
 
 def _encode(value: Any, arrays: dict[str, np.ndarray]) -> Any:
     """A job's result as JSON, its arrays moved to ``arrays``: None, numbers, strings, arrays, tuples,

@@ -8,21 +8,24 @@
    valid: no vertex past the centre (each stays on its own side: ``x . x_rest > 0``) and no inverted
    triangle (every triangle's normal keeps facing out). The analytic tissue itself is checked at forces
    to 10x the device's range. Laryngoscope cases step SoftSphereHaptic-v0 the same way.
-2. Soak: 1,000,000 steps of SoftSphere-v0 and 100,000 of SoftSphereHaptic-v0, half random, half
-   bang-bang actions: memory before and after (traced Python allocations and the process's resident
-   size), and the same-seed episode at the start and at the end, compared bit for bit.
+2. Soak: 1,000,000 steps of SoftSphere-v0 and of each laryngoscope id in one process, and each
+   laryngoscope id's batched twin at 1,024 envs for 10,000 steps; half random, half bang-bang actions:
+   memory at each tenth (Python allocations and the process's resident size), speed in the first and
+   last tenths, and the same-seed episode at the start and at the end, compared bit for bit.
 3. Input classes: the hostile-input tests (``tests/test_surfaces.py`` and the cases of other test files
    named in ``HOSTILE_TESTS``) run under hypothesis's ``long`` profile; each counts the cases it tries
    per input class (the ``tried`` fixture of ``tests/conftest.py``), tabulated with what each class must
    give. Any failing test fails the script.
 
-    python scripts/stability.py [--soak-steps 1000000] [--haptic-soak-steps 100000]
+    python scripts/stability.py [--soak-steps 1000000] [--haptic-soak-steps 1000000] [--batch-soak-steps 10000]
+                                [--batch-envs 1024]
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
+import sys
 import time
 import tracemalloc
 from pathlib import Path
@@ -38,6 +41,7 @@ from softenv.bench.timing import code_revision
 
 ROOT = Path(__file__).resolve().parent.parent
 STEPS = 40
+LARYNGOSCOPE_IDS = ("SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0")
 
 CASES: list[tuple[str, str, dict[str, Any]]] = [
     ("default", "SoftSphere-v0", {}),
@@ -115,12 +119,14 @@ def sweep_case(env_id: str, sections: dict[str, Any]) -> dict[str, Any]:
 
 
 def episode(env: Any, seed: int, actions: np.ndarray) -> np.ndarray:
+    """Observations and rewards of one seeded episode (of every env of a batch: the actions broadcast)."""
+    batch = getattr(env, "num_envs", None)
     obs, _ = env.reset(seed=seed)
-    out = [obs]
+    out = [np.ravel(obs)]
     for a in actions:
-        obs, reward, terminated, truncated, _ = env.step(a)
-        out.append(np.append(obs, reward))
-        if terminated or truncated:
+        obs, reward, terminated, truncated, _ = env.step(a if batch is None else np.broadcast_to(a, (batch, 4)))
+        out.append(np.append(np.ravel(obs), reward))
+        if np.any(terminated) or np.any(truncated):
             break
     return np.concatenate(out)
 
@@ -130,33 +136,46 @@ def resident_mb() -> float:
         return int(fh.read().split()[1]) * 4096 / 1e6
 
 
-def soak(env_id: str, steps: int) -> dict[str, Any]:
-    env = gym.make(env_id)
+def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[str, Any]:
+    """``steps`` steps of ``env_id`` (the single env, or with ``n_envs`` > 1 its batched twin), the first
+    half uniform random actions, the second bang-bang. At the end of each tenth, after a collection: the
+    Python memory held (bytes traced since the start when ``traced``, else the interpreter's allocated
+    blocks: tracemalloc slows the pymunk single env 17-fold), the resident size, and the tenth's env
+    steps per CPU second (CPU, not wall, time: other work on the machine does not read as slowdown)."""
+    env = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point") if n_envs > 1 else gym.make(env_id)
     probe = np.random.default_rng(123).uniform(-1, 1, (60, 4))
     first = episode(env, 7, probe)
     rng = np.random.default_rng(1)
     env.reset(seed=1)
     gc.collect()
-    tracemalloc.start()
-    before_rss = resident_mb()
-    traced = []                        # Python memory held at each tenth: flat means no leak
+    if traced:
+        tracemalloc.start()
+    rss, held, rates = [resident_mb()], [], []
     t0 = time.perf_counter()
     block = max(steps // 10, 1)
     for start in range(0, steps, block):
         n = min(block, steps - start)
-        actions = rng.uniform(-1, 1, (n, 4)) if start < steps // 2 else rng.choice([-1.0, 1.0], (n, 4))
+        shape = (n, 4) if n_envs == 1 else (n, n_envs, 4)
+        actions = rng.uniform(-1, 1, shape) if start < steps // 2 else rng.choice([-1.0, 1.0], shape)
+        cpu = time.process_time()
         for a in actions:
             _, _, terminated, truncated, _ = env.step(a)
-            if terminated or truncated:
-                env.reset()
+            if n_envs == 1 and (terminated or truncated):
+                env.reset()                            # the batched twin resets its own
+        rates.append(n * n_envs / (time.process_time() - cpu))
         gc.collect()
-        traced.append(tracemalloc.get_traced_memory()[0] / 1e3)
+        held.append(tracemalloc.get_traced_memory()[0] / 1e3 if traced else float(sys.getallocatedblocks()))
+        rss.append(resident_mb())
     seconds = time.perf_counter() - t0
-    after_rss = resident_mb()
-    tracemalloc.stop()
+    if traced:
+        tracemalloc.stop()
     last = episode(env, 7, probe)
-    return {"steps": steps, "seconds": seconds, "traced_kb": traced,
-            "rss_mb": (before_rss, after_rss), "same_episode": bool(np.array_equal(first, last))}
+    # no growth: what is held at the end within 5 % (+ a margin for caches filled once) of the first tenth's,
+    # the resident size within 10 MB of the first tenth's, the last tenth at least 80 % of the first's speed
+    grows = held[-1] > 1.05 * held[0] + (100.0 if traced else 2000.0) or rss[-1] > rss[1] + 10.0
+    return {"steps": steps, "n_envs": n_envs, "seconds": seconds, "held": held, "traced": traced, "rss_mb": rss,
+            "rates": rates, "steady": not grows and rates[-1] >= 0.8 * rates[0],
+            "same_episode": bool(np.array_equal(first, last))}
 
 
 HOSTILE_TESTS = ["tests/test_surfaces.py",
@@ -253,11 +272,13 @@ def input_classes() -> tuple[list[str], bool]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--soak-steps", type=int, default=1_000_000)
-    parser.add_argument("--haptic-soak-steps", type=int, default=100_000)
+    parser.add_argument("--haptic-soak-steps", type=int, default=1_000_000, help="each laryngoscope id, single env")
+    parser.add_argument("--batch-soak-steps", type=int, default=10_000, help="each laryngoscope id, batched twin")
+    parser.add_argument("--batch-envs", type=int, default=1024)
     args = parser.parse_args()
     lines = ["# Stability over the documented ranges, a soak, and hostile input\n",
              f"Made by `python scripts/stability.py --soak-steps {args.soak_steps} --haptic-soak-steps "
-             f"{args.haptic_soak_steps}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
+             f"{args.haptic_soak_steps} --batch-soak-steps {args.batch_soak_steps} --batch-envs {args.batch_envs}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}). Each sweep case: "
              f"{STEPS} steps alternating uniform random and bang-bang actions; error = largest float32 decode error "
              "against float64 over the radius; valid = no vertex past the centre and no inverted triangle at any "
              "step; analytic = the analytic tissue finite and valid at 64 loads up to 10x the device's range.\n",
@@ -269,16 +290,27 @@ def main() -> None:
         lines.append(f"| {name} | {env_id} | {r['k']} | {r['error']:.1e} | {'yes' if r['finite'] else '**no**'} | "
                      f"{'yes' if r['valid'] else '**no**'} | {'yes' if r['analytic'] else '**no**'} | {r['seconds']:.1f} |")
         print(lines[-1], flush=True)
-    lines += ["", "Soak: Python memory held since the soak began (traced, after a collection) at the end of each tenth of "
-              "the steps; resident size of the process before and after; wall time with the tracing on.\n",
-              "| soak | steps | wall (s) | traced at 1/10, 5/10, 10/10 (KB) | resident before / after (MB) | "
-              "same-seed episode at start and end |", "|---|---|---|---|---|---|"]
-    for env_id, steps in (("SoftSphere-v0", args.soak_steps), ("SoftSphereHaptic-v0", args.haptic_soak_steps)):
-        r = soak(env_id, steps)
-        healthy &= r["same_episode"]
-        kb = r["traced_kb"]
-        lines.append(f"| {env_id} | {r['steps']:,} | {r['seconds']:.0f} | {kb[0]:.0f}, {kb[4]:.0f}, {kb[-1]:.0f} | "
-                     f"{r['rss_mb'][0]:.0f} / {r['rss_mb'][1]:.0f} | {'bitwise equal' if r['same_episode'] else '**differs**'} |")
+    lines += ["", "Soak: each id stepped in one process, the first half uniform random actions, the second bang-bang "
+              "(the batched twin autoresets; the single env is reset at each episode's end). At the end of each tenth, "
+              "after a collection: the Python memory held (traced: KB allocated since the start and still held, by "
+              "tracemalloc; blocks: the interpreter's allocated blocks, `sys.getallocatedblocks()`, where tracemalloc "
+              "would slow the pymunk single env 17-fold) and the resident size; the first and last tenths' env steps per "
+              "CPU second. Steady: held memory at the end within 5 % of the first tenth's, resident size within 10 MB, "
+              "the last tenth at least 80 % of the first's speed.\n",
+              "| soak | envs | steps | wall (s) | held at 1/10, 5/10, 10/10 | resident at start, 1/10, end (MB) | "
+              "env steps / CPU s, first and last tenth | steady | same-seed episode at start and end |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    soaks = [("SoftSphere-v0", args.soak_steps, 1, True),
+             *((env_id, args.haptic_soak_steps, 1, False) for env_id in LARYNGOSCOPE_IDS),
+             *((env_id, args.batch_soak_steps, args.batch_envs, True) for env_id in LARYNGOSCOPE_IDS)]
+    for env_id, steps, n_envs, traced in soaks:
+        r = soak(env_id, steps, n_envs, traced)
+        healthy &= r["same_episode"] and r["steady"]
+        h, unit = r["held"], "KB traced" if traced else "blocks"
+        lines.append(f"| {env_id} | {n_envs:,} | {r['steps']:,} | {r['seconds']:.0f} | {h[0]:,.0f}, {h[4]:,.0f}, "
+                     f"{h[-1]:,.0f} {unit} | {r['rss_mb'][0]:.0f}, {r['rss_mb'][1]:.0f}, {r['rss_mb'][-1]:.0f} | "
+                     f"{r['rates'][0]:,.0f}, {r['rates'][-1]:,.0f} | {'yes' if r['steady'] else '**no**'} | "
+                     f"{'bitwise equal' if r['same_episode'] else '**differs**'} |")
         print(lines[-1], flush=True)
     table, hostile_ok = input_classes()
     lines += table

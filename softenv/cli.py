@@ -72,7 +72,11 @@ def cmd_data(args: argparse.Namespace) -> None:
     jobs = [Job(f"{law} {n} points", _paper_data_job,
                 (n, args.deformations, args.magnitudes, law, args.noise, args.seed, args.out))
             for law in args.laws for n in args.points]
-    results = run_jobs(jobs, "local", args.jobs, retries=0, echo=lambda line: print(line, file=sys.stderr))
+    try:
+        results = run_jobs(jobs, "local", args.jobs, retries=0, echo=lambda line: print(line, file=sys.stderr))
+    except Interrupted as stop:
+        stop.kept = "the data sets finished so far are cached; run the same command to resume"
+        raise
     print(f"{'data set':<34} {'rows':>5} {'coords':>7} {'noise (m)':>10}  file")
     for r in results:
         if not r.ok:

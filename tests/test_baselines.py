@@ -151,15 +151,15 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     assert whole[2]["kind"] == "agent (1,100 steps)"
     save = RunStore.save
 
-    def stop_after_two(self, job, result):        # SIGTERM arrives after the second job is kept
-        save(self, job, result)
-        if self.count() == 2:
+    def stop_after_two(self, job, result):        # SIGTERM arrives as the third job finishes, before it is kept
+        if len(list(self.dir.glob("*.npz"))) == 2:
             raise Interrupted(15)
+        save(self, job, result)
 
     monkeypatch.setattr(RunStore, "save", stop_after_two)
     with pytest.raises(Interrupted) as stopped:
         run(plan, tmp_path, tmp_path / "runs", "test", echo=quiet, write=False)
-    assert "2 finished jobs are kept" in stopped.value.kept and stopped.value.exit_status == 143
+    assert "2 of 5 jobs are finished and kept" in stopped.value.kept and stopped.value.exit_status == 143
     monkeypatch.setattr(RunStore, "save", save)
     lines: list[str] = []
     again = run(plan, tmp_path, tmp_path / "runs", "test", echo=lines.append, write=False)

@@ -28,4 +28,4 @@ def test_compare_stopped_by_sigkill_or_sigterm_resumes_to_the_same_table(tmp_pat
         assert 1 <= kept < 4 and trial["resume_line"].startswith(f"resuming: {kept} of 4 jobs")
     assert killed["exit_status"] == -9 and stopped["exit_status"] == 143
     assert stopped["stop_line"].startswith("softenv compare: stopped by SIGTERM; ")
-    assert "finished jobs are kept in" in stopped["stop_line"] and "run the same command to resume" in stopped["stop_line"]
+    assert "of 4 jobs are finished and kept in" in stopped["stop_line"] and "run the same command to resume" in stopped["stop_line"]
