@@ -1,0 +1,125 @@
+"""Sphinx configuration: MyST pages, the furo theme, and pages generated from the code at each build
+(one per env id from the env class's docstring and the id's scene, and the settings table from the
+config schema), written to ``docs/_generated`` (ignored by git) so they never drift from the code."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import re
+import sys
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent
+sys.path.insert(0, str(DOCS.parent))
+
+import gymnasium as gym  # noqa: E402
+
+import softenv  # noqa: E402
+from softenv.envs import ENV_SCENES, HAPTIC_SCENES  # noqa: E402
+from softenv.envs.single import SoftSphereEnv  # noqa: E402
+
+project = "softenv"
+release = softenv.__version__
+extensions = ["myst_parser"]
+source_suffix = {".md": "markdown"}
+exclude_patterns = ["_build"]
+html_theme = "furo"
+html_title = f"softenv {release}"
+myst_heading_anchors = 3
+# the API reference: the public objects, each with its signature and docstring (written in Markdown)
+API = {
+    "Environments": ["softenv.envs.single.SoftSphereEnv.reset", "softenv.envs.single.SoftSphereEnv.step",
+                     "softenv.envs.world.World.compute_reward", "softenv.envs.vector.SoftSphereVectorEnv",
+                     "softenv.envs.sb3.SoftSphereSB3VecEnv", "softenv.envs.wrappers.NumpyInfo",
+                     "softenv.make_config", "softenv.describe_config", "softenv.default_config"],
+    "Devices": ["softenv.devices.base.Device", "softenv.devices.base.DeviceBatch", "softenv.devices.base.DeviceKind",
+                "softenv.devices.base.device_kind"],
+    "Shape models and regressors": ["softenv.ShapeModel", "softenv.ShapeModel.fit", "softenv.ShapeModel.encode",
+                                    "softenv.ShapeModel.decode", "softenv.paper_dataset", "softenv.ForceShapeData",
+                                    "softenv.response.make_response"],
+    "The haptic loop and trainee scoring": ["softenv.haptics.HapticLoop", "softenv.haptics.HapticLoop.tick",
+                                            "softenv.haptics.HapticLoop.surface",
+                                            "softenv.training.scoring.score_file"],
+    "Fan-out": ["softenv.parallel.run_jobs", "softenv.parallel.Job", "softenv.parallel.Interrupted",
+                "softenv.parallel.stop_on_signals"],
+    "Baselines and agents": ["baselines.agents.train_agent", "baselines.agents.load_agent",
+                             "baselines.evaluate.evaluate", "baselines.evaluate.normalized_scores",
+                             "baselines.anchors.anchor_job", "baselines.benchmark.run"],
+}
+
+
+def markdown(doc: str, demote: bool = False) -> str:
+    """A docstring as MyST: reST's double backticks and Python roles become code; with ``demote``, its
+    own headings become bold lines (under an API entry's heading)."""
+    text = inspect.cleandoc(doc)
+    text = re.sub(r":(?:mod|class|func|meth|attr|data):`~?([^`]+)`", r"`\1`", text)
+    text = text.replace("``", "`")
+    return re.sub(r"(?m)^#+ (.+)$", r"**\1**", text) if demote else text
+
+
+def resolve(dotted: str) -> object:
+    parts = dotted.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for name in parts[i:]:
+            obj = getattr(obj, name)
+        return obj
+    raise ImportError(dotted)
+
+
+def api_page() -> str:
+    lines = ["# API reference\n", "The public objects, each with its signature and docstring, generated at each build.\n"]
+    for section, names in API.items():
+        lines.append(f"## {section}\n")
+        for dotted in names:
+            obj = resolve(dotted)
+            try:
+                signature = str(inspect.signature(obj))          # type: ignore[arg-type]
+            except (TypeError, ValueError):
+                signature = ""
+            kind = "class" if inspect.isclass(obj) else "def"
+            lines += [f"### `{dotted}`\n", "```python", f"{kind} {dotted.rsplit('.', 1)[1]}{signature}", "```\n",
+                      markdown(inspect.getdoc(obj) or "(no docstring)", demote=True), ""]
+    return "\n".join(lines)
+
+
+def env_page(env_id: str, scene: dict) -> str:
+    env = gym.make(env_id)
+    world = env.unwrapped.world
+    rows = [f"| `{section}.{key}` | `{value!r}` |" for section, values in scene.items() for key, value in values.items()]
+    env.close()
+    return "\n".join([
+        f"# {env_id}\n",
+        f"`gym.make(\"softenv:{env_id}\")`: the one env class, `SoftSphereEnv`, on this scene. Everything not listed "
+        "here is the default of the [settings](../../settings.md); every table of the env (action, observation, "
+        "reward, start, episode end, arguments, versions) is on the [environments](../../environments.md) page.\n",
+        "| | |", "|---|---|",
+        f"| device | `{world.config['device']['kind']}` |",
+        f"| action space | `{env.action_space}` |",
+        f"| observation space | `Box{env.observation_space.shape}` (`obs_mode=\"vector\"`) |",
+        f"| control period | {world.config['dynamics']['dt'] * 1e3:g} ms |",
+        f"| episode | `task.horizon` = {world.horizon} steps ({world.horizon * world.config['dynamics']['dt']:g} s), "
+        f"task `{world.config['task']['kind']}` |", "",
+        "Scene settings this id sets (over the defaults):\n",
+        *(["| setting | value |", "|---|---|", *rows] if rows else ["None: this id is the default scene."]), "",
+        "```python", "import gymnasium as gym", "", f"env = gym.make(\"softenv:{env_id}\")",
+        "obs, info = env.reset(seed=0)", "obs, reward, terminated, truncated, info = env.step(env.action_space.sample())",
+        "```", ""])
+
+
+def generate() -> None:
+    out = DOCS / "_generated"
+    (out / "envs").mkdir(parents=True, exist_ok=True)
+    scenes = {**ENV_SCENES, **HAPTIC_SCENES}
+    for env_id, scene in scenes.items():
+        (out / "envs" / f"{env_id}.md").write_text(env_page(env_id, scene))
+    (out / "env_class.inc").write_text(markdown(SoftSphereEnv.__doc__ or "") + "\n")
+    (out / "settings_table.inc").write_text(softenv.describe_config() + "\n")
+    (out / "api.md").write_text(api_page())
+
+
+generate()
