@@ -407,6 +407,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
             plt.close(fig)
 
 
+ERROR_FLOOR_MM = 1e-3         # the error axes start here (1 um); below it, a policy is drawn at it
+
+
 def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
            curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str,
            stem: str) -> list[tuple[Path, Any]]:
@@ -425,10 +428,15 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     for ax, scene in zip(axes.flat, plan.scenes):
         for s in (s for s in summaries if s["scene"] == scene):
             e, i = s["final_error_mm"], names.index(s["policy"])
-            ax.errorbar(max(s["decision_us"], 0.5), e["mean"], yerr=[[e["mean"] - e["ci_low"]], [e["ci_high"] - e["mean"]]],
+            x = max(s["decision_us"], 0.5)
+            if e["mean"] < ERROR_FLOOR_MM:        # the oracle's ~1e-7 mm would squash every other policy
+                ax.plot(x, ERROR_FLOOR_MM, marker="v", color=colours[i], ms=6, ls="none", label=s["policy"])
+                continue
+            ax.errorbar(x, e["mean"], yerr=[[e["mean"] - max(e["ci_low"], ERROR_FLOOR_MM)], [e["ci_high"] - e["mean"]]],
                         fmt=markers[i % len(markers)], color=colours[i], ms=5, capsize=2, label=s["policy"])
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_ylim(bottom=0.7 * ERROR_FLOOR_MM)
         ax.set_xlabel("decision time per step (us)")
         ax.set_ylabel("final shape error (mm)")
         ax.set_title(scene, fontsize=8)
@@ -438,8 +446,9 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
             handles.setdefault(label, handle)
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(6, max(len(handles), 1)), fontsize=7,
                frameon=False)
-    fig.tight_layout(rect=(0, 0.04 + 0.025 * (len(handles) // 6 + 1), 1, 0.97))
-    fig.suptitle(f"error against decision time (mean, 95 % interval) -- {command}", fontsize=7)
+    fig.tight_layout(rect=(0, 0.04 + 0.025 * (len(handles) // 6 + 1), 1, 0.95))
+    fig.suptitle(f"final shape error against decision time (mean, 95 % interval; errors under {ERROR_FLOOR_MM * 1e3:g} um "
+                 f"drawn as a triangle at {ERROR_FLOOR_MM * 1e3:g} um)\n{command}", fontsize=7)
     return [(out_dir / _error_plot_name(stem), fig),
             (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
             (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
@@ -461,8 +470,14 @@ def _error_plot_name(stem: str) -> str:
 
 def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
                      command: str, plt: Any) -> Any:
-    fig, axes = _grid(plt, len(plan.scenes))
-    for ax, scene in zip(axes.flat, plan.scenes):
+    """Test-target return against env steps, one panel per scene that trained agents; each agent one
+    colour in every panel, named in one legend below the grid."""
+    from matplotlib.ticker import EngFormatter, MaxNLocator  # the viz extra
+
+    scenes = [scene for scene in plan.scenes if any(curves.get((scene, algo)) for algo in plan.agents)]
+    fig, axes = _grid(plt, max(len(scenes), 1), legend_room=0.6)
+    colours = dict(zip(plan.agents, plt.get_cmap("tab10").colors))
+    for ax, scene in zip(axes.flat, scenes):
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])
             if not runs:
@@ -471,27 +486,35 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
             steps, values = runs[0][0][:n], np.stack([c[1][:n] for c in runs])
             mean = values.mean(axis=0)
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.zeros_like(mean)
-            ax.plot(steps, mean, label=f"{algo} ({len(values)} seeds)")
-            ax.fill_between(steps, mean - half, mean + half, alpha=0.25)
+            ax.plot(steps, mean, color=colours[algo], label=algo)
+            ax.fill_between(steps, mean - half, mean + half, color=colours[algo], alpha=0.25)
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))        # 100k, not 100000: labels that fit
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_xlabel("env steps")
         ax.set_ylabel("test-target episode return")
         ax.set_title(scene, fontsize=8)
-        if ax.get_lines():
-            ax.legend(fontsize=6)
-        else:
-            ax.text(0.5, 0.5, "no agents in this run", ha="center", transform=ax.transAxes)
-    fig.suptitle(f"learning curves (mean, 95 % band over seeds) -- {command}", fontsize=7)
-    fig.tight_layout()
+    if not scenes:
+        axes.flat[0].axis("off")
+        axes.flat[0].text(0.5, 0.5, "no agents in this run", ha="center", transform=axes.flat[0].transAxes)
+    seeds = {algo: max((len(curves.get((s, algo), [])) for s in scenes), default=0) for algo in plan.agents}
+    handles = [plt.Line2D([], [], color=colours[a], label=f"{a} ({seeds[a]} seed{'s' if seeds[a] != 1 else ''})")
+               for a in plan.agents if seeds[a]]
+    if handles:
+        fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.06 if handles else 0, 1, 0.93))
+    fig.suptitle(f"learning curves (mean, 95 % band over seeds)\n{command}", fontsize=7)
     return fig
 
 
 def _gallery(command: str, plt: Any) -> Any:
     """Final shapes against targets on one test episode of SoftSphere-v0, for a few baselines."""
+    from softenv.render import displacement_colorbar         # matplotlib: the viz extra
+
     names = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle"]
     env_id, kwargs = scene_kwargs("SoftSphere-v0")
     kwargs.pop("obs_mode")
     world = World(make_config(**kwargs))
-    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 2.6))
+    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 3.3), layout="constrained")
     for ax, name in zip(axes, names):
         env = gym.make(env_id, render_mode="rgb_array", **kwargs)
         policy = make_baseline(name, world)
@@ -502,6 +525,7 @@ def _gallery(command: str, plt: Any) -> Any:
         ax.set_title(f"{name}\n{info['shape_error_mm']:.2f} mm", fontsize=7)
         ax.axis("off")
         env.close()
-    fig.suptitle(f"final shape (colour: displacement) and target (wireframe) -- {command}", fontsize=6)
-    fig.tight_layout()
+    displacement_colorbar(fig, axes, world.scene.tissue.radius, orientation="horizontal", shrink=0.4, aspect=40)
+    fig.suptitle(f"final shape (colour) and target (blue wireframe), one test episode of SoftSphere-v0, with its final "
+                 f"shape error\n{command}", fontsize=6)
     return fig

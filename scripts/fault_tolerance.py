@@ -165,7 +165,7 @@ def trial(kind: str, args: list[str], at_s: float | None, sig: signal.Signals, w
         status, resumed = finish(args, out, runs)
         record["resumed_exit_status"] = status
         record["resume_line"] = next((line.split(" (")[0] for line in resumed.splitlines() if line.startswith("resuming:")),
-                                     "resuming: 0 jobs")
+                                     "nothing finished before the stop: ran from the start")
     else:
         proc.communicate()
         record["exit_status"] = proc.returncode

@@ -6,7 +6,8 @@ The scripted expert's hand log (softenv.training.trainee.expert_hand_log) degrad
 levering and overshoot at 5 levels x 20 trainees (softenv.training.trainee.skill_population), each replayed
 through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount.
 Writes results/scoring_validity.md: the score per level (mean, 95 % bootstrap interval), Spearman's
-rank correlation between skill level and score (target >= 0.9), and which part each error lowers.
+rank correlation between skill level and score (target >= 0.9), and which part each error lowers; and
+results/scoring_validity.png: every trainee's score by skill level, and each error alone.
 """
 
 from __future__ import annotations
@@ -16,12 +17,46 @@ import sys
 import time
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 
-from softenv._artifact import write_text
-from softenv.training.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log
-from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
-from softenv.bench.timing import code_revision
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from softenv._artifact import save_figure, write_text  # noqa: E402
+from softenv.training.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log  # noqa: E402
+from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman  # noqa: E402
+from softenv.bench.timing import code_revision  # noqa: E402
+
+
+def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone: list[tuple[str, float]],
+           expert: float, command: str) -> plt.Figure:
+    """Left: every trainee's score by skill level (jittered), with the level's mean and 95 % interval;
+    right: the expert's score against each error alone at its worst amount."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained", width_ratios=(3, 2))
+    jitter = np.random.default_rng(0).uniform(-0.15, 0.15, len(skill))
+    left.scatter(skill + jitter, scores, s=10, alpha=0.5, color="tab:blue", label="one synthetic trainee")
+    for level in range(levels):
+        mean, lo, hi = bootstrap(scores[skill == level])
+        left.errorbar(level + 0.3, mean, yerr=[[mean - lo], [hi - mean]], fmt="D", color="black", ms=5, capsize=3,
+                      label="mean, 95 % interval" if level == 0 else None)
+    left.set_xticks(range(levels), [f"{level}\n{'expert' if level == levels - 1 else ''}" for level in range(levels)])
+    left.set_xlabel("skill level (0 = every error at its worst)")
+    left.set_ylabel("score (0-100)")
+    left.set_title(f"score by skill: Spearman {rho:.3f}", fontsize=9)
+    left.legend(loc="lower right", fontsize=7)
+    names = [name for name, _ in alone]
+    right.barh(names, [value for _, value in alone], color="tab:orange")
+    right.axvline(expert, color="black", lw=1, ls="--", label=f"the expert: {expert:.1f}")
+    right.set_xlim(0, 100)
+    right.set_xlabel("score (0-100)")
+    right.set_title("each error alone, at its worst amount", fontsize=9)
+    right.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize=7, frameon=False)   # off the bars
+    fig.suptitle(f"Does the trainee score rank skill? -- {command}", fontsize=8)
+    return fig
+
+
+UNITS = {"tremor": "mm", "hesitation": "s", "lever": "rad", "overshoot": "mm"}     # of each error's amount
 
 
 def bootstrap(values: np.ndarray, seed: int = 0) -> tuple[float, float, float]:
@@ -49,10 +84,11 @@ def main() -> None:
         mean, lo, hi = bootstrap(scores[levels == level])
         share = level / max(args.levels - 1, 1)
         rows.append(f"| {args.levels - 1 - level} | {share:.2f} | {mean:.1f} [{lo:.1f}, {hi:.1f}] | {scores[levels == level].min():.1f} |")
-    single = []
+    single, alone = [], []
     for name, part in LOWERS.items():
         amount = WORST.get(name, 1.0)
         p = score_hand_log(degrade(expert_log, **{name: amount}), expert=expert)[0]
+        alone.append((f"{name} = {amount:g} {UNITS.get(name, '')}".rstrip(), p["score"]))
         single.append(f"| {name} = {amount:g} | {part} | {parts[part]:.3f} -> {p[part]:.3f} | {parts['score']:.1f} -> "
                       f"{p['score']:.1f} |")
     command = "python " + " ".join(sys.argv)
@@ -69,9 +105,11 @@ def main() -> None:
           f"score: **{rho:.3f}** (target: >= 0.9).\n",
           "Each error alone at its worst amount, and the part of the score it should lower (weights "
           f"{HAND_WEIGHTS}):\n", "| error | part | part: expert -> trainee | score: expert -> trainee |", "|---|---|---|---|",
-          *single, ""]
+          *single, "", "Figure: `scoring_validity.png`.", ""]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    save_figure(figure(skill, scores, args.levels, rho, alone, parts["score"], command), out / "scoring_validity.png",
+                dpi=110)
     write_text(out / "scoring_validity.md", "\n".join(md))
     print("\n".join(md))
 

@@ -21,6 +21,16 @@ from matplotlib.figure import Figure
 
 # pale pink at rest, deep red where the tissue is displaced most
 TONGUE = LinearSegmentedColormap.from_list("softenv_tongue", ["#f6d3cf", "#e8909a", "#c0394e", "#6e0f26"])
+TOP_OF_SCALE = 0.4        # an env frame's colour scale ends at this fraction of the radius of displacement
+
+
+def displacement_colorbar(fig: Any, axes: Any, radius: float, **options: Any) -> Any:
+    """The colour bar of env frames (displacement in mm, 0 to the top of the scale) beside ``axes``."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    mappable = ScalarMappable(norm=Normalize(0.0, TOP_OF_SCALE * radius * 1e3), cmap=TONGUE)
+    return fig.colorbar(mappable, ax=axes, label="tongue displacement (mm)", **options)
 
 
 class View:
@@ -107,7 +117,7 @@ class SphereFigure:
         self.triangles = triangles
         self.radius = radius
         self.view = view or View()
-        self.vmax = max_displacement if max_displacement is not None else 0.4 * radius
+        self.vmax = max_displacement if max_displacement is not None else TOP_OF_SCALE * radius
         self.cmap = TONGUE
         dpi = 100
         size = (panels * size_px / dpi, size_px / dpi)          # further panels sit right of the sphere
