@@ -16,7 +16,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection, PolyCollection
-from matplotlib.colors import LinearSegmentedColormap
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import LinearSegmentedColormap, Normalize
 from matplotlib.figure import Figure
 
 # pale pink at rest, deep red where the tissue is displaced most
@@ -26,9 +27,6 @@ TOP_OF_SCALE = 0.4        # an env frame's colour scale ends at this fraction of
 
 def displacement_colorbar(fig: Any, axes: Any, radius: float, **options: Any) -> Any:
     """The colour bar of env frames (displacement in mm, 0 to the top of the scale) beside ``axes``."""
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import Normalize
-
     mappable = ScalarMappable(norm=Normalize(0.0, TOP_OF_SCALE * radius * 1e3), cmap=TONGUE)
     return fig.colorbar(mappable, ax=axes, label="tongue displacement (mm)", **options)
 
