@@ -171,12 +171,13 @@ def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[
         tracemalloc.stop()
     last = episode(env, 7, probe)
     # no growth: what is held at the end within 5 % (+ a margin for caches filled once) of the first tenth's,
-    # the resident size within 10 MB of the first tenth's; no slowdown: the best of the last three tenths at
-    # least 90 % of the best of the first three (a slowdown persists; another process's load comes and goes)
+    # the resident size within 10 MB of the first tenth's; no slowdown: within each half (random, bang-bang:
+    # their steps cost differently), the best of its last two tenths at least 90 % of the best of its first
+    # two (a slowdown persists; another process's load comes and goes)
     grows = held[-1] > 1.05 * held[0] + (100.0 if traced else 2000.0) or rss[-1] > rss[1] + 10.0
-    early, late = max(rates[:3]), max(rates[-3:])
+    halves = [(max(rates[0:2]), max(rates[3:5])), (max(rates[5:7]), max(rates[8:10]))]
     return {"steps": steps, "n_envs": n_envs, "seconds": seconds, "held": held, "traced": traced, "rss_mb": rss,
-            "rates": rates, "early": early, "late": late, "steady": not grows and late >= 0.9 * early,
+            "rates": rates, "halves": halves, "steady": not grows and all(late >= 0.9 * early for early, late in halves),
             "same_episode": bool(np.array_equal(first, last))}
 
 
@@ -296,12 +297,12 @@ def main() -> None:
               "(the batched twin autoresets; the single env is reset at each episode's end). At the end of each tenth, "
               "after a collection: the Python memory held (traced: KB allocated since the start and still held, by "
               "tracemalloc; blocks: the interpreter's allocated blocks, `sys.getallocatedblocks()`, where tracemalloc "
-              "would slow the pymunk single env 17-fold) and the resident size; the early and late env steps per "
-              "CPU second (the best of the first three tenths and of the last three: another process's load comes and "
-              "goes, a slowdown stays). Steady: held memory at the end within 5 % of the first tenth's, resident size "
-              "within 10 MB of the first tenth's, the late speed at least 90 % of the early.\n",
+              "would slow the pymunk single env 17-fold) and the resident size; env steps per CPU second early and "
+              "late in each half (the best of its first two tenths and of its last two: another process's load comes "
+              "and goes, a slowdown stays). Steady: held memory at the end within 5 % of the first tenth's, resident "
+              "size within 10 MB of the first tenth's, and in each half the late speed at least 90 % of the early.\n",
               "| soak | envs | steps | wall (s) | held at 1/10, 5/10, 10/10 | resident at start, 1/10, end (MB) | "
-              "env steps / CPU s, early and late | steady | same-seed episode at start and end |",
+              "env steps / CPU s: random half early, late; bang-bang half early, late | steady | same-seed episode at start and end |",
               "|---|---|---|---|---|---|---|---|---|"]
     soaks = [("SoftSphere-v0", args.soak_steps, 1, True),
              *((env_id, args.haptic_soak_steps, 1, False) for env_id in LARYNGOSCOPE_IDS),
@@ -312,7 +313,7 @@ def main() -> None:
         h, unit = r["held"], "KB traced" if traced else "blocks"
         lines.append(f"| {env_id} | {n_envs:,} | {r['steps']:,} | {r['seconds']:.0f} | {h[0]:,.0f}, {h[4]:,.0f}, "
                      f"{h[-1]:,.0f} {unit} | {r['rss_mb'][0]:.0f}, {r['rss_mb'][1]:.0f}, {r['rss_mb'][-1]:.0f} | "
-                     f"{r['early']:,.0f}, {r['late']:,.0f} | {'yes' if r['steady'] else '**no**'} | "
+                     f"{', '.join(f'{v:,.0f}' for half in r['halves'] for v in half)} | {'yes' if r['steady'] else '**no**'} | "
                      f"{'bitwise equal' if r['same_episode'] else '**differs**'} |")
         print(lines[-1], flush=True)
     table, hostile_ok = input_classes()
