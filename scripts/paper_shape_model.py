@@ -30,12 +30,13 @@ import numpy as np  # noqa: E402
 from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.datasets import paper_dataset  # noqa: E402
 from softenv.geometry import interpolate_latlong  # noqa: E402
-from softenv.render import View, draw_surface  # noqa: E402
+from softenv.render import View, displacement_colorbar, draw_surface  # noqa: E402
 from softenv.scree import cattell_scree  # noqa: E402
 from softenv.shape_model import ShapeModel  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 
 EXAGGERATE = 3.0  # figures scale displacements for visibility (stated in their titles)
+FIG41_TOP = 0.003  # Fig. 4.1's colour scale ends at 3 mm: every component's extremes fall under it
 RULES = ["scree", "kneedle", "noise", "variance_0.99", "variance_0.999"]
 
 
@@ -152,7 +153,7 @@ def main() -> None:
     m = ShapeModel("scree").fit(d.shapes, d.mesh)
     view = View(elevation=35, azimuth=-60)
     rest = d.mesh.vertices
-    fig, axes = plt.subplots(3, 3, figsize=(7, 7))
+    fig, axes = plt.subplots(3, 3, figsize=(7, 7.6), layout="constrained")
     for i in range(3):
         for j, level in enumerate((m.b_min_[i], 0.0, m.b_max_[i])):
             b = np.zeros(m.n_components_)
@@ -160,10 +161,11 @@ def main() -> None:
             pts = m.decode(b).reshape(-1, 3)
             shown = rest + EXAGGERATE * (pts - rest)
             draw_surface(axes[i, j], shown, d.mesh.triangles, np.linalg.norm(pts - rest, axis=1), view=view,
-                         vmin=0, vmax=0.003, title=f"b{i + 1} = {level * 1e3:+.2f} mm")
+                         vmin=0, vmax=FIG41_TOP, title=f"b{i + 1} = {level * 1e3:+.2f} mm")
+    displacement_colorbar(fig, axes, R, top=FIG41_TOP, orientation="horizontal", shrink=0.6, aspect=40,
+                          label="displacement (mm, before the x3 drawn)")
     fig.suptitle(f"Components 1-3 of a four-deformation model (cf. the paper's Fig. 4.1); "
-                 f"displacements x{EXAGGERATE:g}", fontsize=10)
-    fig.tight_layout()
+                 f"displacements drawn x{EXAGGERATE:g}", fontsize=10)
     save_figure(fig, out / "paper_fig4_1_components.png", dpi=110)
     plt.close(fig)
 
@@ -174,12 +176,14 @@ def main() -> None:
     combined = rest.ravel() + (surfaces - rest.ravel()).sum(axis=0)   # superposition (linear law)
     b = m.encode(combined)
     pts = m.decode(b).reshape(-1, 3)
-    fig, axes = plt.subplots(1, 2, figsize=(7, 3.6))
+    moved = np.linalg.norm(pts - rest, axis=1)
+    fig, axes = plt.subplots(1, 2, figsize=(7, 4.4), layout="constrained")
     for ax, v in zip(axes, (View(35, -60), View(80, -90))):
-        draw_surface(ax, rest + EXAGGERATE * (pts - rest), d.mesh.triangles, np.linalg.norm(pts - rest, axis=1), view=v)
+        draw_surface(ax, rest + EXAGGERATE * (pts - rest), d.mesh.triangles, moved, view=v, vmin=0, vmax=float(moved.max()))
+    displacement_colorbar(fig, axes, R, top=float(moved.max()), orientation="horizontal", shrink=0.6, aspect=40,
+                          label="displacement (mm, before the x3 drawn)")
     fig.suptitle("Ten deformations combined, rebuilt from 10 shape parameters (cf. Fig. 4.2); "
-                 f"displacements x{EXAGGERATE:g}", fontsize=9)
-    fig.tight_layout()
+                 f"displacements drawn x{EXAGGERATE:g}", fontsize=9)
     save_figure(fig, out / "paper_fig4_2_complex.png", dpi=110)
     plt.close(fig)
     err = np.sqrt(np.mean((m.decode(b) - combined) ** 2)) / R

@@ -25,10 +25,12 @@ TONGUE = LinearSegmentedColormap.from_list("softenv_tongue", ["#f6d3cf", "#e8909
 TOP_OF_SCALE = 0.4        # an env frame's colour scale ends at this fraction of the radius of displacement
 
 
-def displacement_colorbar(fig: Any, axes: Any, radius: float, **options: Any) -> Any:
-    """The colour bar of env frames (displacement in mm, 0 to the top of the scale) beside ``axes``."""
-    mappable = ScalarMappable(norm=Normalize(0.0, TOP_OF_SCALE * radius * 1e3), cmap=TONGUE)
-    return fig.colorbar(mappable, ax=axes, label="tongue displacement (mm)", **options)
+def displacement_colorbar(fig: Any, axes: Any, radius: float, top: float | None = None, **options: Any) -> Any:
+    """The colour bar of displacement in mm beside ``axes``: 0 to ``top`` metres (by default the top of an
+    env frame's scale, ``TOP_OF_SCALE`` of the ``radius``)."""
+    top = TOP_OF_SCALE * radius if top is None else top
+    mappable = ScalarMappable(norm=Normalize(0.0, top * 1e3), cmap=TONGUE)
+    return fig.colorbar(mappable, ax=axes, **{"label": "tongue displacement (mm)", **options})
 
 
 class View:
