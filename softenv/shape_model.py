@@ -34,11 +34,7 @@ MODEL_VERSION = 1
 SOLVERS = ("auto", "gram", "svd", "randomized")
 REGIONS = ("data", "box", "ellipsoid")
 THREE_SIGMA = 0.9973002039367398  # P(|z| <= 3) of a standard normal
-# Batched decoding is one product per block of shapes, never one huge GEMM: with an inner dimension
-# of only k + 1, that runs 2x slower. On OpenBLAS's AVX-512 kernels a block stays within their
-# small-matrix path (no packing, the output written once); elsewhere its output (768 KiB, 68 shapes
-# at 961 points) and the packed components stay in a 1 MiB L2 together. Both from a sweep of 16-128
-# shapes per block on Zen 5; the outcome is in results/perf.md and results/perf-haswell/perf.md.
+# batched decoding: one product per block whose output stays in L2 (docs/performance.md, "Batched decoding")
 _DECODE_BLOCK_BYTES = 768 * 1024
 
 
