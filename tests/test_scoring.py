@@ -29,7 +29,7 @@ def test_shipped_examples_score_expert_then_too_forceful_then_wrong_direction(tm
     assert scores["expert"] > 90
     for ext in ("json", "md", "png"):
         assert (tmp_path / f"expert_score.{ext}").stat().st_size > 100
-    assert "score = 100 (0.5 accuracy" in (tmp_path / "expert_score.md").read_text()
+    assert "score = 100 accuracy (0.5 accuracy" in (tmp_path / "expert_score.md").read_text()
 
 
 def test_examples_are_made_by_the_committed_script(tmp_path):
@@ -41,6 +41,34 @@ def test_examples_are_made_by_the_committed_script(tmp_path):
         ours = [line for line in (tmp_path / rel).read_text().splitlines() if not line.startswith("#")]
         shipped = [line for line in (ROOT / "examples" / rel).read_text().splitlines() if not line.startswith("#")]
         assert ours == shipped, rel
+
+
+def _there_and_back(log: np.ndarray) -> np.ndarray:
+    """``log``, then the same path backward at the same pace, then half a second where it started
+    (the device's force settles)."""
+    back = np.concatenate([log[-2::-1], log[:1]])
+    back[:, 0] = 2 * log[-1, 0] - back[:, 0]
+    back[-1, 0] = back[-2, 0] + 0.5
+    return np.concatenate([log, back])
+
+
+def test_doing_nothing_scores_0_and_withdrawing_about_0_on_both_log_kinds(expert_log, tmp_path):
+    """Safety, teeth and smoothness are earned by progress: a session left alone gets none of them."""
+    still_hand = np.column_stack([np.linspace(0.0, 3.0, 151), np.zeros((151, 4))])
+    forces = expert_trajectory()
+    still_forces = np.column_stack([forces[:, :2], np.zeros((len(forces), 3))])
+    still_forces[:, 1] = forces[0, 1]                              # the blade held at its start
+    for name, log, schema in [("hand_still", still_hand, HAND_LOG), ("hand_back", _there_and_back(expert_log), HAND_LOG),
+                              ("force_still", still_forces, None), ("force_back", _there_and_back(forces), None)]:
+        path = tmp_path / f"{name}.csv"
+        save_log(log, path, schema) if schema else save_trajectory(log, path)
+        report = score_file(path)
+        assert report["accuracy"] < 0.02, name
+        assert report["score"] == pytest.approx(100 * report["accuracy"] * sum(
+            w * report[k] for k, w in report["weights"].items()), abs=1e-9), name
+        assert report["score"] < 1.0 and (report["score"] == 0.0 or "back" in name), (name, report["score"])
+        if "still" in name:
+            assert report["safety"] == 1.0         # the part is there, but it earns nothing without progress
 
 
 def test_constant_press_has_the_analytic_force_time_integral():

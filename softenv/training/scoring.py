@@ -7,7 +7,10 @@ the replay. The target is the centre of the scene's laryngoscopy family (the sam
 trainee); the expert is the scripted one (:mod:`softenv.training.trainee` for hand poses,
 :func:`expert_trajectory` for force commands).
 
-Scores run 0-100: a weighted sum of parts, each clipped to [0, 1]. The formulas, part by part, are
+Scores run 0-100: accuracy times a weighted sum of parts, each clipped to [0, 1]. Every part but
+accuracy counts in proportion to the progress made toward the target, so a session that does nothing,
+or withdraws to where it started, scores 0: safety, teeth and smoothness are earned by doing the task
+gently, not by leaving the patient alone. The formulas, part by part, are
 :data:`HAND_FORMULA` (hand-pose logs: accuracy, speed, safety, teeth, smoothness as SPARC of the
 hand's speed, glottic view) and :data:`FORMULA` (force-command logs: accuracy, speed, safety,
 smoothness as the force's jerk), both built from the weights and terms below, and every report
@@ -55,9 +58,14 @@ HAND_TERMS = {**_COMMON, "safety": "clip(1 - max(peak_tongue_force - safe_force,
 
 
 def formula(weights: dict[str, float], terms: dict[str, str]) -> str:
-    """A score's formula in words: the weighted sum, then each part's definition."""
+    """A score's formula in words: accuracy times the weighted sum, then each part's definition."""
     total = " + ".join(f"{w:g} {name}" for name, w in weights.items())
-    return "; ".join([f"score = 100 ({total})", *(f"{name} = {terms[name]}" for name in weights)])
+    return "; ".join([f"score = 100 accuracy ({total})", *(f"{name} = {terms[name]}" for name in weights)])
+
+
+def total(parts: dict[str, float], weights: dict[str, float]) -> float:
+    """The score from its parts (:func:`formula`): accuracy gates every part, so no progress scores 0."""
+    return 100.0 * parts["accuracy"] * sum(w * parts[name] for name, w in weights.items())
 
 
 FORMULA = formula(WEIGHTS, TERMS)
@@ -206,7 +214,7 @@ def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float
     """The force-command score and its parts (see the module docstring)."""
     parts = _common_parts(trainee, expert, safe_force)
     parts["smoothness"] = float(np.clip(expert.jerk_rms / max(trainee.jerk_rms, 1e-12), 0.0, 1.0))
-    parts["score"] = 100.0 * sum(WEIGHTS[k] * parts[k] for k in WEIGHTS)
+    parts["score"] = total(parts, WEIGHTS)
     return parts
 
 
@@ -219,7 +227,7 @@ def hand_score(trainee: Replay, expert: Replay, safe_force: float, rest_view: fl
     parts["smoothness"] = 0.0 if not math.isfinite(c["sparc"]) else float(np.clip(e["sparc"] / c["sparc"], 0.0, 1.0))
     gain = e["glottic_view_pct"] - rest_view
     parts["view"] = float(np.clip((c["glottic_view_pct"] - rest_view) / gain, 0.0, 1.0)) if gain > 0 else 1.0
-    parts["score"] = 100.0 * sum(HAND_WEIGHTS[k] * parts[k] for k in HAND_WEIGHTS)
+    parts["score"] = total(parts, HAND_WEIGHTS)
     return parts
 
 
