@@ -4,7 +4,8 @@
 
 The scripted expert's hand log (softenv.training.trainee.expert_hand_log) degraded by tremor, hesitation,
 levering and overshoot at 5 levels x 20 trainees (softenv.training.trainee.skill_population), each replayed
-through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount.
+through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount,
+and a session that does nothing or goes to the target and back.
 Writes results/scoring_validity.md: the score per level (mean, 95 % bootstrap interval), Spearman's
 rank correlation between skill level and score (target >= 0.9), and which part each error lowers; and
 results/scoring_validity.png: every trainee's score by skill level, and each error alone.
@@ -25,7 +26,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.training.scoring import HAND_FORMULA, HAND_WEIGHTS, score_hand_log  # noqa: E402
-from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman  # noqa: E402
+from softenv.training.trainee import (LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman,  # noqa: E402
+                                      withdrawn)
 from softenv.bench.timing import code_revision  # noqa: E402
 
 
@@ -50,7 +52,7 @@ def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone
     right.axvline(expert, color="black", lw=1, ls="--", label=f"the expert: {expert:.1f}")
     right.set_xlim(0, 100)
     right.set_xlabel("score (0-100)")
-    right.set_title("each error alone, at its worst amount", fontsize=9)
+    right.set_title("each error alone, at its worst amount; no progress", fontsize=9)
     right.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize=7, frameon=False)   # off the bars
     fig.suptitle(f"Does the trainee score rank skill? -- {command}", fontsize=8)
     return fig
@@ -91,6 +93,11 @@ def main() -> None:
         alone.append((f"{name} = {amount:g} {UNITS.get(name, '')}".rstrip(), p["score"]))
         single.append(f"| {name} = {amount:g} | {part} | {parts[part]:.3f} -> {p[part]:.3f} | {parts['score']:.1f} -> "
                       f"{p['score']:.1f} |")
+    still = expert_log.copy()
+    still[:, 1:] = 0.0                                              # the hand held at its start pose
+    idle = [(label, score_hand_log(log, expert=expert)[0]) for label, log in
+            (("does nothing", still), ("to the target and back", withdrawn(expert_log)))]
+    alone += [(label, p["score"]) for label, p in idle]
     command = "python " + " ".join(sys.argv)
     md = ["# Does the trainee score rank skill?\n",
           f"Made by `{command}` at {code_revision()} in {time.perf_counter() - started:.0f} s ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n",
@@ -105,7 +112,12 @@ def main() -> None:
           f"score: **{rho:.3f}** (target: >= 0.9).\n",
           "Each error alone at its worst amount, and the part of the score it should lower (weights "
           f"{HAND_WEIGHTS}):\n", "| error | part | part: expert -> trainee | score: expert -> trainee |", "|---|---|---|---|",
-          *single, "", "Figure: `scoring_validity.png`.", ""]
+          *single, "",
+          "No progress, no credit: a session that leaves the tongue as it found it scores about 0, whatever its "
+          "safety, teeth and smoothness (every part but accuracy counts in proportion to accuracy):\n",
+          "| session | accuracy | safety | teeth | score |", "|---|---|---|---|---|",
+          *[f"| {label} | {p['accuracy']:.3f} | {p['safety']:.3f} | {p['teeth']:.3f} | {p['score']:.1f} |"
+            for label, p in idle], "", "Figure: `scoring_validity.png`.", ""]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save_figure(figure(skill, scores, args.levels, rho, alone, parts["score"], command), out / "scoring_validity.png",

@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softenv.training.logs import HAND_LOG, save_log
+from softenv.training.logs import FORCE_LOG, HAND_LOG, save_log
 from softenv.training.scoring import (COLUMNS, expert_trajectory, load_trajectory, replay, replay_hand, save_trajectory,
                              score_file, score_hand_log)
-from softenv.training.trainee import LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman
+from softenv.training.trainee import (LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman,
+                                      withdrawn)
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples" / "trajectories"
@@ -43,23 +44,14 @@ def test_examples_are_made_by_the_committed_script(tmp_path):
         assert ours == shipped, rel
 
 
-def _there_and_back(log: np.ndarray) -> np.ndarray:
-    """``log``, then the same path backward at the same pace, then half a second where it started
-    (the device's force settles)."""
-    back = np.concatenate([log[-2::-1], log[:1]])
-    back[:, 0] = 2 * log[-1, 0] - back[:, 0]
-    back[-1, 0] = back[-2, 0] + 0.5
-    return np.concatenate([log, back])
-
-
 def test_doing_nothing_scores_0_and_withdrawing_about_0_on_both_log_kinds(expert_log, tmp_path):
     """Safety, teeth and smoothness are earned by progress: a session left alone gets none of them."""
     still_hand = np.column_stack([np.linspace(0.0, 3.0, 151), np.zeros((151, 4))])
     forces = expert_trajectory()
     still_forces = np.column_stack([forces[:, :2], np.zeros((len(forces), 3))])
     still_forces[:, 1] = forces[0, 1]                              # the blade held at its start
-    for name, log, schema in [("hand_still", still_hand, HAND_LOG), ("hand_back", _there_and_back(expert_log), HAND_LOG),
-                              ("force_still", still_forces, None), ("force_back", _there_and_back(forces), None)]:
+    for name, log, schema in [("hand_still", still_hand, HAND_LOG), ("hand_back", withdrawn(expert_log), HAND_LOG),
+                              ("force_still", still_forces, None), ("force_back", withdrawn(forces, FORCE_LOG), None)]:
         path = tmp_path / f"{name}.csv"
         save_log(log, path, schema) if schema else save_trajectory(log, path)
         report = score_file(path)

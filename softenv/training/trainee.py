@@ -28,7 +28,7 @@ import numpy as np
 from .._validation import check_int, check_real
 from ..control import HandController
 from .hand import hand_limits, haptic_config, haptic_env, relative_hand_pose, speed_limited
-from .logs import HAND_LOG, check_table
+from .logs import HAND_LOG, Schema, check_table
 
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
@@ -51,6 +51,17 @@ def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0
         obs, *_ = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
         poses.append(relative_hand_pose(env))
     return np.column_stack([np.arange(steps + 1) * dt, np.array(poses)])
+
+
+def withdrawn(log: np.ndarray, schema: Schema = HAND_LOG, settle_s: float = 0.5) -> np.ndarray:
+    """``log`` (of ``schema``), then the same path backward at the same pace, then ``settle_s`` held where
+    it started: a trainee who reaches the target and lets it go again (scores about 0)."""
+    log = check_table(log, schema, "log")
+    check_real(settle_s, "settle_s", 0.0, 60.0)
+    back = np.concatenate([log[-2::-1], log[:1]])
+    back[:, 0] = 2 * log[-1, 0] - back[:, 0]
+    back[-1, 0] = back[-2, 0] + max(settle_s, 1e-3)
+    return np.concatenate([log, back])
 
 
 def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
