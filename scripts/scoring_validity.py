@@ -48,7 +48,8 @@ def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone
     left.set_title(f"score by skill: Spearman {rho:.3f}", fontsize=9)
     left.legend(loc="lower right", fontsize=7)
     names = [name for name, _ in alone]
-    right.barh(names, [value for _, value in alone], color="tab:orange")
+    bars = right.barh(names, [value for _, value in alone], color="tab:orange")
+    right.bar_label(bars, fmt="%.1f", fontsize=7, padding=2)
     right.axvline(expert, color="black", lw=1, ls="--", label=f"the expert: {expert:.1f}")
     right.set_xlim(0, 100)
     right.set_xlabel("score (0-100)")
