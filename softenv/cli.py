@@ -171,9 +171,9 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
 
 
 def cmd_score(args: argparse.Namespace) -> None:
-    scene = {"dynamics": {"kind": "viscoelastic"}} if args.scene == "viscoelastic" else {}
-    if args.law != "linear":
-        scene["tissue"] = {"law": args.law}
+    scene = None                      # the log's own scene (or, for a log that records none, the id's)
+    if args.scene is not None or args.law is not None:
+        scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"}}
     report = score_file(args.trajectory, scene, args.out)
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
@@ -289,10 +289,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "
                                       "force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
-    p.add_argument("--scene", choices=["quasi_static", "viscoelastic"], default="quasi_static",
-                   help="tissue dynamics of the replay: quasi_static (default) or viscoelastic")
-    p.add_argument("--law", choices=["linear", "stiffening"], default="linear",
-                   help="tissue law of the replay: linear (default) or stiffening")
+    p.add_argument("--scene", choices=["quasi_static", "viscoelastic"],
+                   help="tissue dynamics of the replay: quasi_static or viscoelastic. A log records its scene and "
+                        "is replayed on it (a contradicting --scene or --law is refused); for an old log that "
+                        "records none: quasi_static unless given")
+    p.add_argument("--law", choices=["linear", "stiffening"],
+                   help="tissue law of the replay: linear or stiffening (as --scene: the log's own if it records "
+                        "one; else linear unless given)")
     p.add_argument("--out", help="write <name>_score.json, .md and .png here")
     return parser
 

@@ -1,5 +1,6 @@
 """Trainee scoring: schema validation, replay physics, the score's ordering on the shipped examples."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -7,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from softenv.training.logs import FORCE_LOG, HAND_LOG, save_log
+from softenv.envs import make_config
+from softenv.training.logs import FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
 from softenv.training.scoring import (COLUMNS, expert_trajectory, load_trajectory, replay, replay_hand, save_trajectory,
                              score_file, score_hand_log)
 from softenv.training.trainee import (LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman,
@@ -210,3 +212,65 @@ def test_bad_device_logs_get_one_line_exit_2_and_nothing_written(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(path) in err and re.search(match, err), err
     assert not out.exists()
+
+
+STIFF = {"tissue": {"law": "stiffening"}}
+
+
+def test_a_log_records_its_scene_and_is_replayed_on_it(expert_log, tmp_path):
+    """A log scores the same whoever scores it: on the scene it records, not on whatever the reader names."""
+    path = tmp_path / "stiff.csv"
+    save_log(expert_log, path, HAND_LOG, scene=STIFF)
+    assert read_scene(path) == STIFF
+    report = score_file(path)
+    assert report["scene"] == STIFF and report["scene_from"] == "the log"
+    table = read_log(path)[1]                                                # as written: 9 digits
+    assert report["score"] == score_hand_log(table, STIFF)[0]["score"] != score_hand_log(table)[0]["score"]
+    same = {"tissue": {"law": "stiffening", "E": make_config()["tissue"]["E"]}}     # the same config, spelt out
+    assert score_file(path, scene=same)["score"] == report["score"]
+    with pytest.raises(ValueError, match=r"was recorded on scene \{'tissue': \{'law': 'stiffening'\}\}; scene=\{\} is "
+                                         "another scene"):
+        score_file(path, scene={})
+
+
+def test_old_logs_without_a_scene_replay_on_the_named_scene(expert_log, tmp_path):
+    path = tmp_path / "old.csv"
+    save_log(expert_log, path, HAND_LOG)
+    path.write_text("".join(line for line in path.read_text().splitlines(keepends=True) if not line.startswith("#")))
+    assert read_scene(path) is None
+    assert score_file(path)["scene_from"] == "the id's own (the log records none)"
+    assert score_file(path, scene=STIFF)["score"] == score_hand_log(read_log(path)[1], STIFF)[0]["score"]
+    np.savez(tmp_path / "old.npz", format_version=1, **{c: expert_log[:, j] for j, c in enumerate(HAND_LOG.columns)})
+    assert score_file(tmp_path / "old.npz", scene=STIFF)["score"] == score_hand_log(expert_log, STIFF)[0]["score"]
+
+
+def test_npz_logs_record_their_scene_in_a_string_member(expert_log, tmp_path):
+    columns = {c: expert_log[:, j] for j, c in enumerate(HAND_LOG.columns)}
+    np.savez(tmp_path / "new.npz", format_version=2, scene=np.array(json.dumps(STIFF)), **columns)
+    assert read_scene(tmp_path / "new.npz") == STIFF
+    assert score_file(tmp_path / "new.npz")["score"] == score_hand_log(expert_log, STIFF)[0]["score"]
+    bad = {"no scene": (dict(format_version=2), "format_version=2 needs a scene member"),
+           "scene in v1": (dict(format_version=1, scene=np.array("{}")), "format_version=1 has no scene member"),
+           "not JSON": (dict(format_version=2, scene=np.array("{tissue")), "member 'scene' is not JSON"),
+           "not sections": (dict(format_version=2, scene=np.array('{"tissue": 5}')), "a JSON object of sections"),
+           "numbers": (dict(format_version=2, scene=np.arange(3)), "member 'scene' declares shape"),
+           "bad value": (dict(format_version=2, scene=np.array('{"tissue": {"E": -1}}')), "the scene it records is not "
+                                                                                          "valid here: .*tissue.E")}
+    for case, (extra, match) in bad.items():
+        np.savez(tmp_path / f"{case}.npz", **extra, **columns)
+        with pytest.raises(ValueError, match=match):
+            score_file(tmp_path / f"{case}.npz")
+
+
+def test_score_refuses_a_scene_that_contradicts_the_logs_own_in_one_line(expert_log, tmp_path, capsys):
+    from softenv.cli import main
+
+    path = tmp_path / "stiff.csv"
+    save_log(expert_log, path, HAND_LOG, scene=STIFF)
+    assert main(["score", str(path), "--law", "linear"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "was recorded on scene" in err and str(path) in err
+    assert main(["score", str(path), "--law", "stiffening"]) == 0
+    path.write_text(path.read_text().replace('"law": "stiffening"', '"law": "stiffening"}, "x": {'))
+    assert main(["score", str(path)]) == 2
+    assert "not valid here" in capsys.readouterr().err

@@ -2,7 +2,12 @@
 
 A log is a table with a ``time_s`` column and one row per sample, stored as CSV (a header row;
 lines starting with ``#`` are comments) or NPZ (one 1-D array per column, plus an integer
-``format_version``; read with ``allow_pickle=False``). Which schema a file holds follows from its
+``format_version``; read with ``allow_pickle=False``). A log of ``format_version`` 2 (what
+:func:`save_log` writes) records the scene it was made on, as JSON: the scene's sections over the
+schema's id (SoftSphereHaptic-v0 for hand poses, SoftSphere-v0 for force commands), in a first line
+``# softenv-log: {"format_version": 2, "scene": {...}}`` of a CSV, or in a string member ``scene`` of
+an NPZ; :func:`read_scene` reads it back. A log without it (``format_version`` 1, every CSV without
+that line) records no scene: it is replayed on the scene its reader names, the id's own by default. Which schema a file holds follows from its
 columns: exactly one schema's columns, each once (a column twice, the columns of both schemas, or a
 column of neither is refused by name). Files over 64 MB (``MAX_FILE_BYTES``), more than
 ``MAX_ROWS`` rows, or NPZ members whose headers or inflated sizes claim more are refused before
@@ -43,6 +48,7 @@ Resampled at the scene's control period, the hand must not move faster than the 
 from __future__ import annotations
 
 import csv
+import json
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +58,10 @@ import numpy as np
 
 from .._artifact import atomic_write
 
-LOG_VERSION = 1
+LOG_VERSION = 2                 # 2: the log records its scene; 1 (no scene) is still read
+LOG_VERSIONS = (1, 2)
+SCENE_TAG = "# softenv-log: "    # a CSV's first line, when it records its scene
+MAX_SCENE_CHARS = 65_536        # a scene's JSON: a few hundred characters; a file claiming more is refused
 MAX_DURATION_S = 600.0          # ten minutes: any laryngoscopy attempt; longer logs are refused up front
 MAX_FILE_BYTES = 64 << 20
 MAX_GAP_S = 1.0                 # hand poses are interpolated between rows: a longer gap leaves the path unknown
@@ -126,8 +135,9 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
     with zipfile.ZipFile(path) as archive:
         members = archive.infolist()
         names = [m.filename.removesuffix(".npy") for m in members]
-        if len(members) > 2 * len(SCHEMAS[0].columns) + 1:
-            raise ValueError(f"{name} has {len(members)} members; a log has one per column and format_version")
+        if len(members) > 2 * len(SCHEMAS[0].columns) + 2:
+            raise ValueError(f"{name} has {len(members)} members; a log has one per column, format_version and "
+                             "scene")
         repeated = sorted({n for n in names if names.count(n) > 1})
         if repeated:
             raise ValueError(f"{name}: members {repeated} appear more than once; each column once")
@@ -140,10 +150,13 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
             version = data["format_version"]
         except ValueError as exc:
             raise ValueError(f"{name}: format_version cannot be read without pickle: {exc}") from None
-        if version.shape != () or version.dtype.kind not in "iu" or int(version) != LOG_VERSION:
-            raise ValueError(f"{name}: format_version={version.tolist()!r}; this softenv reads {LOG_VERSION} "
-                             "(one integer)")
-        schema = _pick_schema([k for k in data.files if k != "format_version"], name, schema)
+        if version.shape != () or version.dtype.kind not in "iu" or int(version) not in LOG_VERSIONS:
+            raise ValueError(f"{name}: format_version={version.tolist()!r}; this softenv reads "
+                             f"{' or '.join(map(str, LOG_VERSIONS))} (one integer)")
+        if ("scene" in data.files) != (int(version) == 2):
+            raise ValueError(f"{name}: format_version={int(version)} "
+                             f"{'needs a' if int(version) == 2 else 'has no'} scene member")
+        schema = _pick_schema([k for k in data.files if k not in ("format_version", "scene")], name, schema)
         columns = {}
         for c in schema.columns:
             try:
@@ -160,6 +173,52 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
     return schema, np.stack([columns[c].astype(np.float64) for c in schema.columns], axis=1)
 
 
+def read_scene(path: str | Path) -> dict[str, Any] | None:
+    """The scene sections a log records (``format_version`` 2), or None for a log that records none.
+    Call it on a file :func:`read_log` accepted; a record that is not the documented JSON is refused by
+    name."""
+    path = Path(path)
+    name = f"trajectory {str(path)!r}"
+    if path.suffix == ".npz":
+        with np.load(path, allow_pickle=False) as data:
+            if "scene" not in data.files:
+                return None
+            try:
+                member = data["scene"]
+            except ValueError as exc:
+                raise ValueError(f"{name}: member 'scene' cannot be read without pickle: {exc}") from None
+            return _scene_json(str(member), f"{name}: member 'scene'", wrapped=False)
+    with open(path, encoding="utf-8") as fh:
+        first = fh.readline()
+    if not first.startswith(SCENE_TAG):
+        return None
+    return _scene_json(first[len(SCENE_TAG):], f"{name}: line 1", wrapped=True)
+
+
+def _scene_json(text: str, where: str, wrapped: bool) -> dict[str, Any]:
+    """A recorded scene from its JSON text (a CSV's line wraps it with its format_version)."""
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where} is not JSON: {exc}") from None
+    if wrapped:
+        if not isinstance(record, dict) or set(record) != {"format_version", "scene"} or record["format_version"] != 2:
+            raise ValueError(f"{where} must be {{\"format_version\": 2, \"scene\": {{...}}}}, got {text.strip()[:200]!r}")
+        record = record["scene"]
+    if not isinstance(record, dict) or not all(isinstance(v, dict) for v in record.values()):
+        raise ValueError(f"{where}: the scene must be a JSON object of sections (objects), got {str(record)[:200]!r}")
+    return record
+
+
+def scene_json(scene: dict[str, Any] | None) -> str:
+    """``scene``'s sections as the JSON a log records (None: the id's own scene, ``{}``)."""
+    try:
+        return json.dumps(scene or {}, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"scene={scene!r} cannot be recorded in a log: {exc} (use plain numbers, strings, lists "
+                         "and dicts)") from None
+
+
 def _check_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, key: str, name: str) -> None:
     """One NPZ member's size, from the zip directory and the ``.npy`` header alone: at most ``MAX_ROWS``
     numbers of at most 8 bytes (a header may claim anything; the inflated size must match it)."""
@@ -174,6 +233,11 @@ def _check_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, key: str, n
                                else np.lib.format.read_array_header_2_0(fh))
         except ValueError as exc:
             raise ValueError(f"{name}: member {key!r} is not a .npy array: {exc}") from None
+    if key == "scene":
+        if shape != () or dtype.kind != "U" or dtype.itemsize > 4 * MAX_SCENE_CHARS:
+            raise ValueError(f"{name}: member 'scene' declares shape {shape} of {dtype}; it is one string (JSON) of "
+                             f"at most {MAX_SCENE_CHARS:,} characters")
+        return
     count = int(np.prod(shape, dtype=object))
     if count > MAX_ROWS or dtype.itemsize > 8:
         raise ValueError(f"{name}: member {key!r} declares shape {shape} of {dtype}; at most {MAX_ROWS:,} numbers "
@@ -247,11 +311,15 @@ def check_limits(table: np.ndarray, schema: Schema, limits: dict[str, tuple[floa
                              f"[{lo:g}, {hi:g}]")
 
 
-def save_log(table: np.ndarray, path: str | Path, schema: Schema, note: str = "") -> None:
-    """Write a log as CSV (checked first; written atomically: a failed write leaves no short file)."""
+def save_log(table: np.ndarray, path: str | Path, schema: Schema, note: str = "",
+             scene: dict[str, Any] | None = None) -> None:
+    """Write a log as CSV of ``format_version`` 2, recording ``scene`` (the sections over the schema's id;
+    None: the id's own scene). Checked first; written atomically: a failed write leaves no short file."""
     table = check_table(table, schema)
+    record = f'{SCENE_TAG}{{"format_version": 2, "scene": {scene_json(scene)}}}\n'
 
     def write(fh: Any) -> None:
+        fh.write(record)
         if note:
             fh.write(f"# {note}\n")
         writer = csv.writer(fh)

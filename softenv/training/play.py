@@ -146,7 +146,8 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     log = np.column_stack([np.arange(len(poses)) * dt, np.array(poses)])
     out = Path(out_dir)
     path = out / f"session_{time.strftime('%Y%m%d-%H%M%S')}.csv"
-    save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s")
+    save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s",
+             scene=scene)
     live = env.device.clinical_summary(env.b)
     report = score_file(path, scene, out)
     echo(f"wrote {path}; score {report['score']:.1f}/100 ("

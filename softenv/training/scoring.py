@@ -39,7 +39,8 @@ from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..envs.single import SoftSphereEnv
 from .hand import action_to, hand_actions, haptic_config, haptic_env, relative_box, relative_hand_pose
-from .logs import FORCE_LOG, HAND_LOG, MAX_DURATION_S, check_limits, check_table, read_log, save_log
+from .logs import (FORCE_LOG, HAND_LOG, MAX_DURATION_S, Schema, check_limits, check_table, read_log, read_scene,
+                   save_log)
 from .trainee import expert_hand_log
 
 COLUMNS = FORCE_LOG.columns
@@ -205,9 +206,9 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
                      np.clip(sideways, -dev["max_sideways_force"], dev["max_sideways_force"])], axis=1)
 
 
-def save_trajectory(table: np.ndarray, path: str | Path, note: str = "") -> None:
-    """Write a force-command log as CSV (:func:`softenv.training.logs.save_log`)."""
-    save_log(table, path, FORCE_LOG, note)
+def save_trajectory(table: np.ndarray, path: str | Path, note: str = "", scene: dict[str, Any] | None = None) -> None:
+    """Write a force-command log as CSV, recording ``scene`` (:func:`softenv.training.logs.save_log`)."""
+    save_log(table, path, FORCE_LOG, note, scene)
 
 
 def score(trainee: Replay, expert: Replay, safe_force: float) -> dict[str, float]:
@@ -251,13 +252,39 @@ def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, sourc
     return hand_score(trainee, expert, config["reward"]["safe_force"], rest_view), trainee, expert
 
 
+def log_config(schema: Schema, scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """The config a log of ``schema`` replays on: its id's scene (SoftSphereHaptic-v0 for hand poses,
+    SoftSphere-v0 for force commands) with ``scene``'s sections."""
+    return haptic_config(scene) if schema is HAND_LOG else make_config(**scene_sections(scene))
+
+
+def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None) -> tuple[dict[str, Any], str]:
+    """The scene a log is replayed on, and where it came from: the one it records (a ``scene`` that
+    makes another config is refused by name, never silently used), else ``scene``, else the id's own."""
+    source = f"trajectory {str(path)!r}"
+    recorded = read_scene(path)
+    if recorded is None:
+        return scene_sections(scene), "the caller" if scene else "the id's own (the log records none)"
+    try:
+        config = log_config(schema, recorded)
+    except ValueError as exc:
+        raise ValueError(f"{source}: the scene it records is not valid here: {exc}") from None
+    if scene is not None and log_config(schema, scene) != config:
+        raise ValueError(f"{source} was recorded on scene {recorded}; scene={scene} is another scene (omit it to "
+                         "replay the log on its own)")
+    return recorded, "the log"
+
+
 def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
-    """Score a log file (hand poses or force commands, by its columns); with ``out_dir``, write
-    ``<name>_score.json``, ``.md`` and ``.png``. Arguments and file are checked before any replay."""
+    """Score a log file (hand poses or force commands, by its columns) on the scene it records (a log of
+    ``format_version`` 2), else on ``scene`` (None: the id's own); a ``scene`` that contradicts the
+    recorded one is refused. With ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``.
+    Arguments and file are checked before any replay."""
     if out_dir is not None:
         check_out_dir(out_dir, "out directory")
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
+    scene, scene_from = scene_of(path, schema, scene)
     if schema is HAND_LOG:
         parts, trainee, expert = score_hand_log(table, scene, source)
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
@@ -266,7 +293,8 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
         check_ranges(table, config, source)
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
         parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
-    report = {"trajectory": printable(str(path)), "log": schema.name, "scene": scene_sections(scene), **parts, "weights": weights,
+    report = {"trajectory": printable(str(path)), "log": schema.name, "scene": scene, "scene_from": scene_from, **parts,
+              "weights": weights,
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
     if out_dir is not None:                 # the three files all or nothing: a failed write leaves none of them
         out = Path(out_dir)
@@ -310,7 +338,8 @@ def _markdown(report: dict[str, Any]) -> str:
                  ("glottic view", f"{mc['glottic_view_pct']:.0f} %", f"{ec['glottic_view_pct']:.0f} %"),
                  ("duration", f"{mc['duration_s']:.2f} s", f"{ec['duration_s']:.2f} s")]
     lines = [f"# Trainee score: {report['score']:.1f} / 100\n", f"Trajectory `{report['trajectory']}` "
-             f"({report['log']}).\n", "| metric | trainee | expert |", "|---|---|---|",
+             f"({report['log']}), replayed on scene sections `{json.dumps(report['scene'])}` "
+             f"(from {report['scene_from']}).\n", "| metric | trainee | expert |", "|---|---|---|",
              *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
              "| part | weight | value |", "|---|---|---|",
              *[f"| {k} | {w:g} | {report[k]:.3f} |" for k, w in report["weights"].items()], "",
