@@ -194,7 +194,24 @@ def cmd_play(args: argparse.Namespace) -> None:
     elif not play.display_available():              # else SDL would run a session nobody sees
         raise ValueError("no display to open a window on (DISPLAY and WAYLAND_DISPLAY are unset): run softenv play "
                          "on a desktop, or pass --headless for a session without a window")
-    play.run(args.seconds, args.out)
+    bridge = None
+    if args.bridge is not None:
+        bridge = play.open_bridge(*args.bridge)
+        host, port = bridge.address
+        print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.training.bridge)")
+    try:
+        play.run(args.seconds, args.out, bridge=bridge)
+    finally:
+        if bridge is not None:
+            bridge.close()
+
+
+def _bridge_address(text: str) -> tuple[str, int]:
+    """``PORT`` or ``HOST:PORT`` (port 0-65535; 0 picks a free one) -> (host, port); host 127.0.0.1 unless given."""
+    host, _, port = text.rpartition(":")
+    if not port.isdigit() or int(port) > 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} must be PORT or HOST:PORT with a port in 0-65535")
+    return host or "127.0.0.1", int(port)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -285,6 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"session length in s (0-{MAX_DURATION_S:g}, the longest log that can be scored; default 10)")
     p.add_argument("--out", default="play", help="where the device log and its score report go (default: play)")
     p.add_argument("--headless", action="store_true", help="no window (SDL's dummy driver): for a smoke run")
+    p.add_argument("--bridge", type=_bridge_address, metavar="[HOST:]PORT",
+                   help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
+                        "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")
 
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "

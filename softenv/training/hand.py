@@ -129,6 +129,20 @@ def action_to(now: np.ndarray, goal: np.ndarray, dt: float, p: LaryngoscopeParam
     return np.clip(action, -1.0, 1.0)
 
 
+def action_toward(env: Any, goal: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    """The action that brings ``env``'s hand from where it is to the relative pose ``goal`` in one
+    control period (:func:`action_to`); where the device cannot, the nearest it can (clipped): the hand
+    lags, as a hand on the device would. Closed loop: the replay of a log and a pose device's session
+    both steer by it, so rounding never accumulates."""
+    p = env.device.laryngoscope.params
+    now, dt = relative_hand_pose(env), env.world.config["dynamics"]["dt"]
+    action = action_to(now, goal, dt, p, relative_box(p), tol=tol)
+    if action is None:
+        v = (goal - now) / dt
+        action = np.clip(hand_action(v[0], v[1], v[2], v[3], now[2], p), -1.0, 1.0)
+    return action.astype(np.float32)
+
+
 def _planar_action(v: np.ndarray, wall: np.ndarray, pitch: float, speed: float, tol: float) -> np.ndarray | None:
     """Insert and press ``(a0, a1)`` in the square whose world velocity ``speed * M a`` equals ``v`` on the
     free axes and reaches at least ``v`` into the walls on the others, driving hardest into them (a linear

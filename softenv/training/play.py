@@ -37,7 +37,9 @@ from typing import Any, Callable
 import numpy as np
 
 from .. import clinical
-from .hand import haptic_config, haptic_env, relative_hand_pose
+from ..devices.laryngoscope.params import LaryngoscopeParams
+from .bridge import LOOPBACK, BridgeServer
+from .hand import action_toward, haptic_config, haptic_env, relative_box, relative_hand_pose
 from .logs import HAND_LOG, save_log
 from .scoring import score_file
 
@@ -101,11 +103,16 @@ class Controls:
 
 def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, Any] | None = None,
         realtime: bool = True, script: Callable[[int], list[Any]] | None = None,
-        echo: Callable[[str], None] = print) -> Session:
+        echo: Callable[[str], None] = print, bridge: BridgeServer | None = None) -> Session:
     """Play one session of ``seconds``; write ``<out_dir>/session_<time>.csv`` and its score report.
 
     ``script(step)`` returns pygame events to post before each step (a scripted player, for tests and
-    demos); ``realtime=False`` steps as fast as it can.
+    demos); ``realtime=False`` steps as fast as it can. With ``bridge`` (:mod:`softenv.training.bridge`)
+    a device drives the hand instead of the keys: each control period the hand moves toward the newest
+    pose it sent (held where it was if none came) and the rendered force goes back to it; with
+    ``realtime=False`` the session waits up to a second each period for the device's next pose (lockstep).
+    The log's comment line says how many of its messages were accepted, garbled, out of range, late or
+    from another sender.
     """
     import pygame                       # the play extra: only for a session
 
@@ -125,6 +132,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
         font = pygame.font.Font(None, 22)
         controls = Controls(pygame)
         poses, info = [relative_hand_pose(env)], {}
+        goal, seq = poses[0], 0                        # a device's newest pose (the start until it sends one)
         started = time.perf_counter()
         for step in range(steps):
             for event in (script(step) if script else []):
@@ -133,7 +141,16 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
                 controls.handle(event)
             if controls.quit:
                 break
-            _, _, _, _, info = env.step(controls.action().astype(np.float32))
+            if bridge is None:
+                action = controls.action().astype(np.float32)
+            else:
+                sent = bridge.poll(0.0 if realtime else 1.0)
+                if sent is not None:
+                    goal, seq = sent.pose, sent.seq
+                action = action_toward(env, goal)
+            _, _, _, _, info = env.step(action)
+            if bridge is not None:
+                bridge.send_force(seq, (step + 1) * dt, info["haptic_force_N"])
             poses.append(relative_hand_pose(env))
             _draw(screen, font, env, info, step + 1, steps, dt)
             pygame.display.flip()
@@ -146,8 +163,10 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     log = np.column_stack([np.arange(len(poses)) * dt, np.array(poses)])
     out = Path(out_dir)
     path = out / f"session_{time.strftime('%Y%m%d-%H%M%S')}.csv"
-    save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s",
-             scene=scene)
+    by = "keys" if bridge is None else "a device over the bridge, messages " + ", ".join(
+        f"{k} {v}" for k, v in bridge.counts.items())
+    save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s, "
+             f"driven by {by}", scene=scene)
     live = env.device.clinical_summary(env.b)
     report = score_file(path, scene, out)
     echo(f"wrote {path}; score {report['score']:.1f}/100 ("
@@ -201,6 +220,16 @@ def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, ste
              "arrows: insert / lift   A D: sweep   Q E: pitch   Esc: end"]
     for i, text in enumerate(lines):
         screen.blit(font.render(text, True, (20, 20, 20)), (x0, 290 + 28 * i))
+
+
+def open_bridge(host: str = LOOPBACK, port: int = 0, scene: dict[str, Any] | None = None) -> BridgeServer:
+    """A bridge for a device to drive a session on ``scene``, its poses checked against the hand's
+    workspace; refused in one line if the address cannot be bound."""
+    limits = relative_box(LaryngoscopeParams.from_config(haptic_config(scene)))
+    try:
+        return BridgeServer(limits, host, port)
+    except OSError as exc:
+        raise ValueError(f"--bridge {host}:{port} cannot be listened on: {exc.strerror or exc}") from None
 
 
 def display_available() -> bool:

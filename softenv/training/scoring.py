@@ -34,11 +34,10 @@ import numpy as np
 from .. import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_real, printable
-from ..devices.laryngoscope.physics import hand_action
 from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..envs.single import SoftSphereEnv
-from .hand import action_to, hand_actions, haptic_config, haptic_env, relative_box, relative_hand_pose
+from .hand import action_toward, hand_actions, haptic_config, haptic_env
 from .logs import (FORCE_LOG, HAND_LOG, MAX_DURATION_S, Schema, check_limits, check_table, read_log, read_scene,
                    save_log)
 from .trainee import expert_hand_log
@@ -160,17 +159,10 @@ def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: 
     accumulates)."""
     times, poses = hand_actions(table, scene, source)
     env = haptic_env(scene, len(times))
-    world, p, dt = env.world, env.device.laryngoscope.params, times[0]
-    box = relative_box(p)
-    env.reset(seed=0, options={"target": _family_centre(world)})
+    env.reset(seed=0, options={"target": _family_centre(env.world)})
     error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
-    for k in range(len(times)):
-        now = relative_hand_pose(env)
-        a = action_to(now, poses[k + 1], dt, p, box, tol=1e-3)        # the log's own moves passed at 1e-6
-        if a is None:                                 # rounding of the tracked pose only: the nearest action
-            v = (poses[k + 1] - now) / dt
-            a = np.clip(hand_action(v[0], v[1], v[2], v[3], now[2], p), -1.0, 1.0)
-        _, _, _, _, info = env.step(a.astype(np.float32))
+    for k in range(len(times)):                       # the log's own moves passed at 1e-6: 1e-3 is rounding
+        _, _, _, _, info = env.step(action_toward(env, poses[k + 1]))
         error[k], force[k], incisor[k] = info["shape_error_mm"], info["tongue_force_N"], info["incisor_force_N"]
     return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"])
 
