@@ -156,3 +156,12 @@ def test_force_messages_decode_only_as_force_messages():
     data = encode_force(3, 1.0, [1.0, 2.0, 3.0])
     assert decode(data, FORCE, FORCE_MAGIC) == (3, 1.0, 1.0, 2.0, 3.0)
     assert decode(data, POSE, b"SEVP") is None and decode(data[:-1], FORCE, FORCE_MAGIC) is None
+
+
+def test_bench_measures_the_round_trip_and_counts_nothing_lost_on_loopback():
+    from softenv.bench.bridge import bench_bridge
+
+    rows = {r.metric.split(" (")[0]: r for r in bench_bridge(True, None)}
+    median, p99 = rows["pose -> force round trip, median"], rows["pose -> force round trip, p99"]
+    assert 0.0 < median.value <= p99.value and median.unit == "us"
+    assert rows["messages lost (no answer in 0.1 s) or answering another pose"].value == 0.0

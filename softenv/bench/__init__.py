@@ -27,6 +27,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "sb3": ("softenv.bench.env", "bench_sb3"),
     "torch": ("softenv.bench.env", "bench_torch"),
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
+    "bridge": ("softenv.bench.bridge", "bench_bridge"),
     "gpu": ("softenv.bench.env", "bench_gpu"),          # only with --device cuda
 }
 DEFAULT_SECTIONS = [name for name in SECTIONS if name != "gpu"]
