@@ -4,8 +4,8 @@
 
 The scripted expert's hand log (softenv.training.trainee.expert_hand_log) degraded by tremor, hesitation,
 levering and overshoot at 5 levels x 20 trainees (softenv.training.trainee.skill_population), each replayed
-through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount,
-and a session that does nothing or goes to the target and back.
+through the laryngoscope and scored (softenv.training.scoring); then each error alone at its worst amount
+and over its amounts, and a session that does nothing or goes to the target and back.
 Writes results/scoring_validity.md: the score per level (mean, 95 % bootstrap interval), Spearman's
 rank correlation between skill level and score (target >= 0.9), and which part each error lowers; and
 results/scoring_validity.png: every trainee's score by skill level, and each error alone.
@@ -32,10 +32,18 @@ from softenv.bench.timing import code_revision  # noqa: E402
 
 
 def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone: list[tuple[str, float]],
-           expert: float, command: str) -> plt.Figure:
+           expert: float, graded: dict[str, list[float]], command: str) -> plt.Figure:
     """Left: every trainee's score by skill level (jittered), with the level's mean and 95 % interval;
-    right: the expert's score against each error alone at its worst amount."""
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained", width_ratios=(3, 2))
+    middle: the expert's score against each error alone at its worst amount; right: each error alone over
+    its amounts, and the part of the score it lowers."""
+    fig, (left, right, graph) = plt.subplots(1, 3, figsize=(14, 4), layout="constrained", width_ratios=(3, 2, 2))
+    for name, values in graded.items():
+        graph.plot(SHARES, values, "o-", ms=4, label=f"{name}: {LOWERS[name]}")
+    graph.set_xlabel("amount (share of the worst)")
+    graph.set_ylabel("the part it lowers (0-1)")
+    graph.set_ylim(0, 1.05)
+    graph.set_title("each error alone, over its amounts", fontsize=9)
+    graph.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, fontsize=7, frameon=False)
     jitter = np.random.default_rng(0).uniform(-0.15, 0.15, len(skill))
     left.scatter(skill + jitter, scores, s=10, alpha=0.5, color="tab:blue", label="one synthetic trainee")
     for level in range(levels):
@@ -59,6 +67,7 @@ def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone
     return fig
 
 
+SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)      # of each error's worst amount, for the graded study
 UNITS = {"tremor": "mm", "hesitation": "s", "lever": "rad", "overshoot": "mm"}     # of each error's amount
 
 
@@ -87,6 +96,8 @@ def main() -> None:
         mean, lo, hi = bootstrap(scores[levels == level])
         share = level / max(args.levels - 1, 1)
         rows.append(f"| {args.levels - 1 - level} | {share:.2f} | {mean:.1f} [{lo:.1f}, {hi:.1f}] | {scores[levels == level].min():.1f} |")
+    graded = {name: [score_hand_log(degrade(expert_log, **{name: share * WORST.get(name, 1.0)}), expert=expert)[0][part]
+                     for share in SHARES] for name, part in LOWERS.items()}
     single, alone = [], []
     for name, part in LOWERS.items():
         amount = WORST.get(name, 1.0)
@@ -114,6 +125,11 @@ def main() -> None:
           "Each error alone at its worst amount, and the part of the score it should lower (weights "
           f"{HAND_WEIGHTS}):\n", "| error | part | part: expert -> trainee | score: expert -> trainee |", "|---|---|---|---|",
           *single, "",
+          f"Each error alone over its amounts ({', '.join(f'{x:g}' for x in SHARES)} of its worst), and the part it "
+          "lowers: every part falls as its error grows, never rises.\n",
+          "| error | part | " + " | ".join(f"{x:g}" for x in SHARES) + " |", "|---|---|" + "---|" * len(SHARES),
+          *[f"| {name} | {LOWERS[name]} | " + " | ".join(f"{v:.3f}" for v in values) + " |"
+            for name, values in graded.items()], "",
           "No progress, no credit: a session that leaves the tongue as it found it scores about 0, whatever its "
           "safety, teeth and smoothness (every part but accuracy counts in proportion to accuracy):\n",
           "| session | accuracy | safety | teeth | score |", "|---|---|---|---|---|",
@@ -121,7 +137,7 @@ def main() -> None:
             for label, p in idle], "", "Figure: `scoring_validity.png`.", ""]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    save_figure(figure(skill, scores, args.levels, rho, alone, parts["score"], command), out / "scoring_validity.png",
+    save_figure(figure(skill, scores, args.levels, rho, alone, parts["score"], graded, command), out / "scoring_validity.png",
                 dpi=110)
     write_text(out / "scoring_validity.md", "\n".join(md))
     print("\n".join(md))

@@ -185,6 +185,8 @@ def test_score_ranks_graded_skill_and_each_error_lowers_its_part(expert_log):
     for name, part in LOWERS.items():
         degraded = score_hand_log(degrade(expert_log, **{name: WORST.get(name, 1.0)}), expert=expert)[0]
         assert degraded[part] < parts[part] - 0.1 and degraded["score"] < parts["score"], name
+        half = score_hand_log(degrade(expert_log, **{name: 0.5 * WORST.get(name, 1.0)}), expert=expert)[0]
+        assert parts[part] >= half[part] >= degraded[part], name          # the part falls as the error grows
 
 
 def _device_log(tmp_path, rows: list[str], header: str = "time_s,hand_x_m,hand_z_m,hand_pitch_rad,hand_y_m") -> Path:
