@@ -276,3 +276,18 @@ def test_score_refuses_a_scene_that_contradicts_the_logs_own_in_one_line(expert_
     path.write_text(path.read_text().replace('"law": "stiffening"', '"law": "stiffening"}, "x": {'))
     assert main(["score", str(path)]) == 2
     assert "not valid here" in capsys.readouterr().err
+
+
+def test_profiles_built_to_published_measurements_reach_them_and_rank_in_the_published_order(expert_log):
+    """Carlson et al. 2012's intermediates and novices (time only) and Bishop et al. 1992's novices: each
+    profile reaches its asked time ratio, and the scores fall expert > intermediate > novice."""
+    from softenv.training import profiles
+
+    parts, _, expert = score_hand_log(expert_log)
+    built = {name: profiles.build(name, study, ratios, expert_log, expert, iterations=8)
+             for name, study, *ratios in profiles.PROFILES if name in ("intermediate", "novice (time)")}
+    for p in built.values():
+        assert p.reached[0] == pytest.approx(p.asked[0], rel=0.05) and p.amounts["hesitation"] > 0.0, p.name
+        assert p.reached[2] == pytest.approx(1.0)                       # only the time was asked of these
+    scores = [parts["score"]] + [score_hand_log(p.log, expert=expert)[0]["score"] for p in built.values()]
+    assert scores[0] > scores[1] > scores[2]
