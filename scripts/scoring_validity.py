@@ -44,7 +44,7 @@ def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone
                                                     width_ratios=(3, 2, 2, 2))
     bars = study.barh([name for name, _ in published][::-1], [value for _, value in published][::-1], color="tab:blue")
     study.bar_label(bars, fmt="%.1f", fontsize=7, padding=2)
-    study.set_xlim(0, 100)
+    study.set_xlim(0, 110)                  # room for the labels
     study.set_xlabel("score (0-100)")
     study.set_title("profiles built to published measurements", fontsize=9)
     for name, values in graded.items():
@@ -69,7 +69,7 @@ def figure(skill: np.ndarray, scores: np.ndarray, levels: int, rho: float, alone
     bars = right.barh(names, [value for _, value in alone], color="tab:orange")
     right.bar_label(bars, fmt="%.1f", fontsize=7, padding=2)
     right.axvline(expert, color="black", lw=1, ls="--", label=f"the expert: {expert:.1f}")
-    right.set_xlim(0, 100)
+    right.set_xlim(0, 110)
     right.set_xlabel("score (0-100)")
     right.set_title("each error alone, at its worst amount; no progress", fontsize=9)
     right.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize=7, frameon=False)   # off the bars
