@@ -7,9 +7,9 @@ lines starting with ``#`` are comments) or NPZ (one 1-D array per column, plus a
 schema's id (SoftSphereHaptic-v0 for hand poses, SoftSphere-v0 for force commands), in a first line
 ``# softenv-log: {"format_version": 2, "scene": {...}}`` of a CSV, or in a string member ``scene`` of
 an NPZ; :func:`read_scene` reads it back. A log without it (``format_version`` 1, every CSV without
-that line) records no scene: it is replayed on the scene its reader names, the id's own by default. Which schema a file holds follows from its
-columns: exactly one schema's columns, each once (a column twice, the columns of both schemas, or a
-column of neither is refused by name). Files over 64 MB (``MAX_FILE_BYTES``), more than
+that line) records no scene: it is replayed on the scene its reader names, the id's own by default.
+Which schema a file holds follows from its columns: exactly one schema's columns, each once (a column
+twice, the columns of both schemas, or a column of neither is refused by name). Files over 64 MB (``MAX_FILE_BYTES``), more than
 ``MAX_ROWS`` rows, or NPZ members whose headers or inflated sizes claim more are refused before
 anything is allocated; every problem is a ``ValueError`` naming the file, and the row (1 = first
 data row) and column where one applies.
