@@ -5,8 +5,9 @@
 
 Full form: one uninterrupted ``softenv compare --quick --jobs 2`` (the reference), then
 
-* local trials: the parent killed (SIGKILL, SIGTERM or SIGINT, in turn) at a time drawn uniformly in
-  [10 %, 90 %] of the reference's run time, then the same command run again to the end;
+* local trials: the parent killed (SIGKILL, SIGTERM or SIGINT, in turn) once a number of jobs drawn
+  uniformly from 1 to 90 % of the plan's have finished (a point in the run's work, not in time: another
+  process's load cannot move it past the end), then the same command run again to the end;
 * Ray trials (``--executor ray``): a task worker (``ray::_attempt``) killed by SIGKILL mid-job, which
   Ray retries within the run; and the driver killed by SIGKILL, then the command run again.
 
@@ -24,9 +25,11 @@ import csv
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import zipfile
 from pathlib import Path
@@ -127,10 +130,10 @@ def damaged(*dirs: Path) -> tuple[list[str], list[str]]:
     return bad, litter
 
 
-def trial(kind: str, args: list[str], at_s: float | None, sig: signal.Signals, work: Path,
+def trial(kind: str, args: list[str], after: int, sig: signal.Signals, work: Path,
           reference: list[list[str]]) -> dict[str, Any]:
     """One stop and resume: ``kind`` is ``parent`` (signal the command) or ``ray-worker`` (SIGKILL a Ray
-    task worker; Ray retries it). ``at_s`` None: strike after the first finished job."""
+    task worker; Ray retries it), once ``after`` jobs have finished."""
     out, runs = work / "out", work / "runs"
     proc = start(args, out, runs)
     os.set_blocking(proc.stdout.fileno(), False)      # type: ignore[union-attr]
@@ -140,7 +143,7 @@ def trial(kind: str, args: list[str], at_s: float | None, sig: signal.Signals, w
     while proc.poll() is None and struck is None:
         seen |= {pid: cmdline(pid) for pid in descendants(proc.pid) - seen.keys()}
         text += (proc.stdout.read() or b"").decode(errors="replace")   # type: ignore[union-attr]
-        due = time.monotonic() - t0 >= at_s if at_s is not None else "[1/" in text
+        due = f"[{after}/" in text
         if due and kind == "ray-worker":
             workers = [pid for pid in seen if alive(pid) and cmdline(pid).startswith("ray::_attempt")]
             if workers:                                     # else wait until a job runs
@@ -155,6 +158,7 @@ def trial(kind: str, args: list[str], at_s: float | None, sig: signal.Signals, w
     stopped = time.monotonic()                        # workers outlive the parent from here
     os.set_blocking(proc.stdout.fileno(), True)       # type: ignore[union-attr]
     record: dict[str, Any] = {"kind": kind, "signal": sig.name if kind == "parent" else "SIGKILL (one Ray worker)",
+                              "after_jobs": after,
                               "at_s": round(struck, 1) if struck is not None else "never (the run had ended)"}
     if kind == "parent":
         rest, _ = proc.communicate()
@@ -183,34 +187,37 @@ def trial(kind: str, args: list[str], at_s: float | None, sig: signal.Signals, w
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, required=True, help="where fault_tolerance.md and .json go")
-    parser.add_argument("--work", type=Path, default=Path("runs/fault_tolerance"), help="scratch runs (default: runs/, ignored)")
+    parser.add_argument("--work", type=Path, default=Path("runs/fault_tolerance"), help="scratch runs go in a fresh folder here (default: runs/fault_tolerance, ignored)")
     parser.add_argument("--local-kills", type=int, default=4)
     parser.add_argument("--ray-kills", type=int, default=2, help="of each Ray kind (a worker, the driver)")
-    parser.add_argument("--seed", type=int, default=0, help="draws the kill times")
+    parser.add_argument("--seed", type=int, default=0, help="draws the kill points")
     parser.add_argument("--smoke", action="store_true",
                         help="a small plan stopped once by SIGKILL and once by SIGTERM, each after its first finished job")
     a = parser.parse_args(argv)
     args = SMOKE if a.smoke else QUICK
-    work = a.work.resolve()
+    a.work.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix="run-", dir=a.work)).resolve()   # fresh: an earlier run's jobs would resume
     t0 = time.monotonic()
     status, text = finish(args, work / "reference" / "out", work / "reference" / "runs")
     if status != 0:
         raise SystemExit(f"the reference run failed ({status}):\n{text}")
     run_s = time.monotonic() - t0
     reference = cells(work / "reference" / "out")
+    jobs = int(re.findall(r"\[\d+/(\d+) jobs", text)[-1])
     rng = np.random.default_rng(a.seed)
-    plans: list[tuple[str, list[str], float | None, signal.Signals]] = []
+    draw = lambda top: int(rng.integers(1, max(2, int(top * jobs)) + 1))  # noqa: E731 - finished jobs
+    plans: list[tuple[str, list[str], int, signal.Signals]] = []
     if a.smoke:
-        plans += [("parent", args, None, signal.SIGKILL), ("parent", args, None, signal.SIGTERM)]
+        plans += [("parent", args, 1, signal.SIGKILL), ("parent", args, 1, signal.SIGTERM)]
     else:
         signals = [signal.SIGKILL, signal.SIGTERM, signal.SIGINT]
-        plans += [("parent", args, float(rng.uniform(0.1, 0.9) * run_s), signals[i % 3]) for i in range(a.local_kills)]
+        plans += [("parent", args, draw(0.9), signals[i % 3]) for i in range(a.local_kills)]
         ray = [*args, "--executor", "ray"]
-        plans += [("ray-worker", ray, float(rng.uniform(0.1, 0.6) * run_s), signal.SIGKILL) for _ in range(a.ray_kills)]
-        plans += [("parent", ray, float(rng.uniform(0.1, 0.9) * run_s), signal.SIGKILL) for _ in range(a.ray_kills)]
+        plans += [("ray-worker", ray, draw(0.6), signal.SIGKILL) for _ in range(a.ray_kills)]
+        plans += [("parent", ray, draw(0.9), signal.SIGKILL) for _ in range(a.ray_kills)]
     records = []
-    for i, (kind, cmd, at_s, sig) in enumerate(plans):
-        record = trial(kind, cmd, at_s, sig, work / f"trial-{i}", reference)
+    for i, (kind, cmd, after, sig) in enumerate(plans):
+        record = trial(kind, cmd, after, sig, work / f"trial-{i}", reference)
         record["executor"] = "ray" if "ray" in cmd else "local"
         records.append(record)
         print(json.dumps(record), flush=True)
@@ -227,10 +234,12 @@ def main(argv: list[str] | None = None) -> None:
              "process the run had started still ran (SIGKILL gives the parent no chance to act: its workers see it "
              "gone). *Truncated*: files in the report and run directories that do not read whole. *Temporary*: files "
              "a stopped write left beside its target (never read).\n",
-             "| # | executor | stopped by | at (s) | exit status | workers outlived (s) | Ray services outlived (s) | "
-             "resumed run | cells equal | truncated | temporary |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| # | executor | stopped by | after jobs | at (s) | exit status | workers outlived (s) | Ray services "
+             "outlived (s) | resumed run | cells equal | truncated | temporary |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for i, r in enumerate(records):
-        lines.append(f"| {i} | {r['executor']} | {r['signal']} | {r['at_s']} | {r['exit_status']} | {r['orphan_s']} | "
+        lines.append(f"| {i} | {r['executor']} | {r['signal']} | {r['after_jobs']} of {jobs} | {r['at_s']} | "
+                     f"{r['exit_status']} | {r['orphan_s']} | "
                      f"{r['ray_services_s'] if r['executor'] == 'ray' else '-'} | "
                      f"{r['resume_line']} | {r['cells_equal']} of {r['cells']} | {len(r['truncated'])} | "
                      f"{r['temporary_left']} |")
