@@ -27,6 +27,7 @@ from .shape_model import ShapeModel
 from ._artifact import check_out_dir
 from ._validation import check_int, check_real, printable
 from .training import play
+from .training.bridge import LOOPBACK
 from .training.logs import MAX_DURATION_S
 from .training.scoring import score_file
 
@@ -211,7 +212,7 @@ def _bridge_address(text: str) -> tuple[str, int]:
     host, _, port = text.rpartition(":")
     if not port.isdigit() or int(port) > 65535:
         raise argparse.ArgumentTypeError(f"{text!r} must be PORT or HOST:PORT with a port in 0-65535")
-    return host or "127.0.0.1", int(port)
+    return host or LOOPBACK, int(port)
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -39,9 +39,14 @@ def relative_hand_pose(env: Any) -> np.ndarray:
     return np.array([x - gx, z - gy, pitch, y])
 
 
+def workspace(config: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The hand's workspace relative to its start pose under ``config`` (low, high; x, z, pitch, y)."""
+    return relative_box(LaryngoscopeParams.from_config(config))
+
+
 def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
     """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
-    low, high = relative_box(LaryngoscopeParams.from_config(config))
+    low, high = workspace(config)
     return {c: (float(lo), float(hi)) for c, lo, hi in zip(HAND_LOG.columns[1:], low, high)}
 
 

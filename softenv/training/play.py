@@ -37,9 +37,8 @@ from typing import Any, Callable
 import numpy as np
 
 from .. import clinical
-from ..devices.laryngoscope.params import LaryngoscopeParams
 from .bridge import LOOPBACK, BridgeServer
-from .hand import action_toward, haptic_config, haptic_env, relative_box, relative_hand_pose
+from .hand import action_toward, haptic_config, haptic_env, relative_hand_pose, workspace
 from .logs import HAND_LOG, save_log
 from .scoring import score_file
 
@@ -225,9 +224,8 @@ def _draw(screen: Any, font: Any, env: Any, info: dict[str, Any], step: int, ste
 def open_bridge(host: str = LOOPBACK, port: int = 0, scene: dict[str, Any] | None = None) -> BridgeServer:
     """A bridge for a device to drive a session on ``scene``, its poses checked against the hand's
     workspace; refused in one line if the address cannot be bound."""
-    limits = relative_box(LaryngoscopeParams.from_config(haptic_config(scene)))
     try:
-        return BridgeServer(limits, host, port)
+        return BridgeServer(workspace(haptic_config(scene)), host, port)
     except OSError as exc:
         raise ValueError(f"--bridge {host}:{port} cannot be listened on: {exc.strerror or exc}") from None
 
