@@ -28,6 +28,7 @@ from ._artifact import check_out_dir
 from ._validation import check_int, check_real, printable
 from .training import play
 from .training.bridge import LOOPBACK
+from .training.inputs import CONTROLS
 from .training.logs import MAX_DURATION_S
 from .training.scoring import score_file
 
@@ -201,7 +202,7 @@ def cmd_play(args: argparse.Namespace) -> None:
         host, port = bridge.address
         print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.training.bridge)")
     try:
-        play.run(args.seconds, args.out, bridge=bridge)
+        play.run(args.seconds, args.out, bridge=bridge, screens=not args.headless)
     finally:
         if bridge is not None:
             bridge.close()
@@ -298,11 +299,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--retries", type=_bounded(int, 0, 100), default=1,
                    help="re-runs of a failed job before it is reported (0-100; default 1)")
 
-    p = sub.add_parser("play", help="drive the laryngoscope yourself (keyboard, mouse, gamepad); scored at the end")
+    p = sub.add_parser("play", help="drive the laryngoscope yourself (keyboard, mouse, gamepad); scored at the end",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="A start screen states the task; the window shows the tongue against the target, "
+                                   "the laryngoscope and the forces; an end screen gives the score, each part against "
+                                   "the expert's, and what to improve first.",
+                       epilog="controls:\n" + "\n".join(f"  {key:<14}{what}" for key, what in CONTROLS))
     p.add_argument("--seconds", type=_bounded(float, 0.0, MAX_DURATION_S, low_open=True), default=10.0,
                    help=f"session length in s (0-{MAX_DURATION_S:g}, the longest log that can be scored; default 10)")
     p.add_argument("--out", default="play", help="where the device log and its score report go (default: play)")
-    p.add_argument("--headless", action="store_true", help="no window (SDL's dummy driver): for a smoke run")
+    p.add_argument("--headless", action="store_true",
+                   help="no window (SDL's dummy driver) and no start or end screen: the session starts at once and "
+                        "ends with its score (a bridge-driven or smoke run)")
     p.add_argument("--bridge", type=_bridge_address, metavar="[HOST:]PORT",
                    help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")

@@ -138,7 +138,8 @@ def test_a_simulated_device_process_drives_a_session_that_scores_like_its_log(tm
     reader = threading.Thread(target=lambda: out.append(device.communicate(timeout=120)[0]))
     reader.start()
     try:
-        session = play.run(seconds=table[-1, 0], out_dir=tmp_path, realtime=False, echo=lambda s: None, bridge=bridge)
+        session = play.run(seconds=table[-1, 0], out_dir=tmp_path, realtime=False, echo=lambda s: None, bridge=bridge,
+                           screens=False)
     finally:
         reader.join()
         bridge.close()

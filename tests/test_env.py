@@ -155,6 +155,25 @@ def test_exact_oracle_scores_100_and_zero_force_scores_0():
         assert reward < -0.5 and not info["is_success"] and info["normalized_score"] == pytest.approx(0.0, abs=1e-9)
 
 
+def test_success_error_mm_is_the_shape_error_where_success_begins():
+    """Actions blended from rest to the target force cross the success line once: the steps on each side of it
+    say is_success exactly when their shape error is under ``success_error_mm``."""
+    env = gym.make("SoftSphere-v0")
+    target = np.array([0.3, -0.05, 0.6, 0.5], np.float32)
+    env.reset(seed=0, options={"target": target})
+    with pytest.raises(RuntimeError, match="reset"):
+        gym.make("SoftSphere-v0").unwrapped.success_error_mm
+    rest = env.unwrapped.world.force_box.rest_action
+    line = env.unwrapped.success_error_mm
+    seen = set()
+    for s in np.linspace(0.0, 1.0, 60):
+        _, _, _, _, info = env.step((rest + s * (target - rest)).astype(np.float32))
+        assert info["is_success"] == (info["shape_error_mm"] < line * (1 - 1e-12)) or \
+            abs(info["shape_error_mm"] - line) < 1e-9 * line
+        seen.add(info["is_success"])
+    assert seen == {True, False}
+
+
 def test_shape_error_and_reward_agree_with_rebuilt_vertices():
     """b-space distances against an independent computation on decoded surfaces."""
     env = gym.make("SoftSphere-v0", obs_mode="vertices")

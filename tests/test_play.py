@@ -1,12 +1,19 @@
-"""softenv play, headless (SDL's dummy video driver) with a scripted player: the recorded device log
-scores like the session it came from."""
+"""softenv play, headless (SDL's dummy video driver) with a scripted player, tested as a person uses it:
+what the window shows (the task, the target, gauges that move and turn red past their limits, the teeth
+flagged when touched, the end screen's score and advice), the controls (ramped keys, Shift, mouse,
+gamepad, pause), and the recorded device log, which scores like the session it came from."""
 
 import numpy as np
 import pygame
 import pytest
 
 from softenv.training import play
+from softenv.training.inputs import CONTROLS, DEAD_ZONE, FINE, RAMP_FLOOR, RAMP_S, PygameInput
 from softenv.training.logs import read_log
+from softenv.training.play_view import DANGER, SOLID, TARGET
+
+DT = 0.02
+MAX_HAND_SPEED = 0.2          # SoftSphereHaptic-v0's device: m/s at full action
 
 
 def _key(key: int, down: bool) -> "pygame.event.Event":
@@ -22,14 +29,23 @@ def _player(step: int) -> list:
             46: [pygame.event.Event(pygame.MOUSEBUTTONUP, button=1, pos=(100, 130))]}.get(step, [])
 
 
+def _ramp_distance(periods: int) -> float:
+    """How far a key held for ``periods`` control periods moves the hand, by the documented ramp."""
+    held = DT * np.arange(1, periods + 1)
+    return float(MAX_HAND_SPEED * DT * np.sum(RAMP_FLOOR + (1 - RAMP_FLOOR) * np.minimum(held / RAMP_S, 1.0)))
+
+
 def test_a_scripted_session_writes_a_log_that_scores_like_the_session(tmp_path):
     play.headless()
-    session = play.run(seconds=1.2, out_dir=tmp_path, realtime=False, script=_player, echo=lambda s: None)
+    session = play.run(seconds=1.2, out_dir=tmp_path, realtime=False, script=_player, echo=lambda s: None,
+                       screens=False)
     logs = list(tmp_path.glob("session_*.csv"))
     assert len(logs) == 1 and (tmp_path / f"{logs[0].stem}_score.md").exists()
     schema, table = read_log(logs[0])
     assert schema.columns[1] == "hand_x_m" and len(table) == 61             # 60 control periods and the start
-    assert table[8, 1] < -0.01 and table[24, 2] < table[8, 2]                # inserted, then lifted (pressed)
+    # the insert key held for 8 periods ramps up as documented (the blade starts level: insert is -x)
+    assert table[8, 1] == pytest.approx(-_ramp_distance(8), rel=1e-9)
+    assert table[24, 2] < table[8, 2]                                        # then lifted (pressed)
     assert table[-1, 4] > 0.0                                                # swept right
     # the replay of the log is the session: same shape error and clinical metrics
     metrics = session.report["metrics"]
@@ -41,11 +57,11 @@ def test_a_scripted_session_writes_a_log_that_scores_like_the_session(tmp_path):
 
 def test_escape_ends_the_session_early_and_an_empty_session_is_an_error(tmp_path):
     play.headless()
-    session = play.run(seconds=5.0, out_dir=tmp_path, realtime=False, echo=lambda s: None,
+    session = play.run(seconds=5.0, out_dir=tmp_path, realtime=False, echo=lambda s: None, screens=False,
                        script=lambda step: [_key(pygame.K_ESCAPE, True)] if step == 10 else [])
     assert len(session.log) == 11
     with pytest.raises(ValueError, match="ended before its first control period"):
-        play.run(seconds=5.0, out_dir=tmp_path / "none", realtime=False, echo=lambda s: None,
+        play.run(seconds=5.0, out_dir=tmp_path / "none", realtime=False, echo=lambda s: None, screens=False,
                  script=lambda step: [pygame.event.Event(pygame.QUIT)])
     assert not (tmp_path / "none").exists()
     assert np.isfinite(session.log).all()
@@ -60,18 +76,19 @@ def test_play_command_runs_headless_and_prints_the_score(tmp_path, capsys):
 
 
 def test_a_session_with_keys_held_together_into_the_walls_replays_as_it_was_played(tmp_path):
-    """Two and four keys at once drive the hand at full speed on several axes and into its walls: the log is
-    accepted, and its replay gives the session's shape error and clinical metrics exactly."""
+    """Two and four keys at once drive the hand on several axes and into its walls (the keys still ramping
+    when it reaches them): the log is accepted, and its replay gives the session's shape error and clinical
+    metrics to rounding, because the keys steer to the pose they reach as the replay does (hand.pose_after)."""
     play.headless()
     keys = [pygame.K_LEFT, pygame.K_DOWN, pygame.K_d, pygame.K_e]
     script = {0: [_key(k, True) for k in keys[:2]], 20: [_key(k, True) for k in keys[2:]],
               45: [_key(k, False) for k in keys]}
     session = play.run(seconds=1.2, out_dir=tmp_path, realtime=False, script=lambda step: script.get(step, []),
-                       echo=lambda s: None)
+                       echo=lambda s: None, screens=False)
     metrics = session.report["metrics"]
-    assert metrics["final_error_mm"] == session.live_final_error_mm
+    assert metrics["final_error_mm"] == pytest.approx(session.live_final_error_mm, rel=1e-9)
     for key in ("peak_tongue_force_N", "tongue_force_time_Ns", "hand_path_m", "glottic_view_pct"):
-        assert metrics["clinical"][key] == session.live_clinical[key], key
+        assert metrics["clinical"][key] == pytest.approx(session.live_clinical[key], rel=1e-9, abs=1e-12), key
 
 
 def test_without_a_display_play_refuses_in_one_line_unless_headless(tmp_path, monkeypatch, capsys):
@@ -94,5 +111,160 @@ def test_a_session_opens_no_sound_device(tmp_path, monkeypatch):
     opened = []
     monkeypatch.setattr(pygame, "init", lambda: opened.append("init"))
     monkeypatch.setattr(pygame.mixer, "init", lambda *a, **k: opened.append("mixer"))
-    play.run(seconds=0.1, out_dir=tmp_path, realtime=False, echo=lambda s: None)
+    play.run(seconds=0.1, out_dir=tmp_path, realtime=False, echo=lambda s: None, screens=False)
     assert opened == [] and not pygame.mixer.get_init()
+
+
+# -- what a person sees --------------------------------------------------------------------------------
+
+class Recorder:
+    """``on_frame``: every frame's phase, what was drawn, and copies of chosen frames."""
+
+    def __init__(self, keep=()):
+        self.phases, self.drawn, self.frames, self.keep = [], [], {}, set(keep)
+
+    def __call__(self, frame, phase, view):
+        self.phases.append(phase)
+        self.drawn.append(dict(view.drawn))
+        if frame in self.keep or (phase == "end" and "end" not in self.frames):
+            self.frames["end" if phase == "end" else frame] = pygame.surfarray.array3d(view.screen).copy()
+
+
+def _pixels(image, rect):
+    x, y, w, h = rect
+    return image[x:x + w, y:y + h].reshape(-1, 3)
+
+
+def _has_colour(image, rect, colour, tol=0):
+    return bool((np.abs(_pixels(image, rect).astype(int) - colour) <= tol).all(axis=1).any())
+
+
+def test_the_start_screen_states_the_task_and_waits_for_the_player(tmp_path):
+    play.headless()
+    seen = Recorder()
+    script = {6: [_key(pygame.K_SPACE, True)], 40: [_key(pygame.K_RETURN, True)]}
+    session = play.run(seconds=0.4, out_dir=tmp_path, realtime=False, echo=lambda s: None, on_frame=seen,
+                       script=lambda f: script.get(f, []))
+    assert seen.phases[:6] == ["start"] * 6 and "start" not in seen.phases[6:]
+    assert {"title", "task", "start", "target outline"} <= set(seen.drawn[0])
+    assert seen.phases.count("run") == 20 and len(session.log) == 21       # waiting on the start screen is not played
+    # the end screen holds until Enter (or Esc, or closing the window): frames 0-5 start, 6 starts the session,
+    # 7-26 play it, 27-40 show the end screen
+    assert seen.phases[26:] == ["end"] * 14 and len(seen.phases) == 40
+
+
+def test_a_session_shows_the_target_gauges_that_move_and_the_score_at_the_end(tmp_path):
+    play.headless()
+    seen = Recorder(keep=(1, 30))
+    script = {0: [_key(pygame.K_LEFT, True)], 12: [_key(pygame.K_LEFT, False), _key(pygame.K_DOWN, True)],
+              30: [_key(pygame.K_DOWN, False)], 1: []}
+    session = play.run(seconds=1.0, out_dir=tmp_path, realtime=False, echo=lambda s: None, on_frame=seen,
+                       screens=True, script=lambda f: ([_key(pygame.K_SPACE, True)] if f == 0 else [])
+                       + script.get(f - 1, []) + ([_key(pygame.K_ESCAPE, True)] if f == 60 else []))
+    first, pressed, end = seen.frames[1], seen.frames[30], seen.frames["end"]
+    drawn = seen.drawn[30]
+    # the target: its dashed outline in the side view, in the target's green
+    assert _has_colour(pressed, drawn["target outline"], TARGET)
+    # the gauges move: the tongue-force bar is empty at the start and filled when pressing
+    assert seen.drawn[1]["gauge:tongue"][2] == 0 < drawn["gauge:tongue"][2]
+    assert "gauge:tongue limit" in drawn and "gauge:incisors limit" in drawn
+    # the remaining error as colour: the 3D tongue is redder at rest than when pressed toward the target
+    red = lambda image: float(np.mean(_pixels(image, SOLID)[:, 0].astype(int) - _pixels(image, SOLID)[:, 1]))  # noqa: E731
+    assert red(first) > red(pressed)
+    # the end screen: the score, each part, two pieces of advice, drawn on the card
+    last = seen.drawn[-1]
+    assert {"score", "leave", "advice:0"} <= set(last) and all(f"part:{k}" in last for k in session.report["weights"])
+    assert _pixels(end, last["score"]).min() < 60                          # dark text on the white card
+    assert len(session.report["advice"]) == 2 and session.report["score"] < 100
+
+
+def test_the_tongue_gauge_turns_red_past_the_safe_force_and_the_teeth_are_flagged_when_touched(tmp_path):
+    """A low safe force (5 N) is passed while pressing; levering back on the teeth (ease off and tip the blade
+    up, as scripts/laryngoscope_frames.py does) loads the incisors: the side view says so where it happens."""
+    play.headless()
+    seen = Recorder()
+    script = {0: [_key(pygame.K_LEFT, True)], 10: [_key(pygame.K_LEFT, False), _key(pygame.K_DOWN, True)],
+              22: [_key(pygame.K_DOWN, False), _key(pygame.K_UP, True), _key(pygame.K_q, True)]}
+    play.run(seconds=1.2, out_dir=tmp_path, realtime=False, echo=lambda s: None, screens=False, on_frame=seen,
+             scene={"reward": {"safe_force": 5.0}}, script=lambda f: script.get(f, []))
+    touched = [d for d in seen.drawn if "incisor contact" in d]
+    assert touched, "the incisors were never flagged"
+    assert not any("incisor contact" in d for d in seen.drawn[:10])        # not before the blade reaches them
+
+
+def test_the_tongue_bar_turns_to_the_danger_colour_past_the_safe_force_only(tmp_path):
+    """The same press under the default safe force (30 N) and under 5 N: the bar's colour says which."""
+    play.headless()
+    script = {0: [_key(pygame.K_LEFT, True)], 10: [_key(pygame.K_LEFT, False), _key(pygame.K_DOWN, True)],
+              18: [_key(pygame.K_DOWN, False)]}
+    colours = {}
+    for safe in (30.0, 5.0):
+        last = {}
+
+        def keep(frame, phase, view):
+            last["image"], last["drawn"] = pygame.surfarray.array3d(view.screen).copy(), dict(view.drawn)
+            last["force"] = view.last_forces["tongue"]
+
+        play.run(seconds=0.5, out_dir=tmp_path / str(safe), realtime=False, echo=lambda s: None, screens=False,
+                 on_frame=keep, scene={"reward": {"safe_force": safe}}, script=lambda f: script.get(f, []))
+        assert 5.0 < last["force"] < 30.0                                     # between the two limits
+        x, y, w, h = last["drawn"]["gauge:tongue"]
+        colours[safe] = tuple(last["image"][x + 2, y + h // 2])
+    assert colours[5.0] == DANGER and colours[30.0] != DANGER
+
+
+def test_pause_stops_the_clock_and_the_log(tmp_path):
+    play.headless()
+    seen = Recorder()
+    script = {3: [_key(pygame.K_SPACE, True)], 13: [_key(pygame.K_p, True)]}
+    session = play.run(seconds=0.2, out_dir=tmp_path, realtime=False, echo=lambda s: None, screens=False, on_frame=seen,
+                       script=lambda f: script.get(f, []))
+    assert seen.phases == ["run"] * 3 + ["paused"] * 10 + ["run"] * 7
+    assert "paused" in seen.drawn[5] and len(session.log) == 11
+
+
+# -- the controls ----------------------------------------------------------------------------------------
+
+class _Pad:
+    def __init__(self, axes):
+        self.axes = axes
+
+    def get_numaxes(self):
+        return len(self.axes)
+
+    def get_axis(self, j):
+        return self.axes[j]
+
+
+def test_keys_ramp_and_shift_slows_them_and_mouse_and_gamepad_add():
+    pygame.display.init()
+    try:
+        device = PygameInput(pygame)
+        device.handle(_key(pygame.K_LEFT, True))
+        rates = [device.rates(DT)[0] for _ in range(40)]
+        expected = RAMP_FLOOR + (1 - RAMP_FLOOR) * np.minimum(DT * np.arange(1, 41) / RAMP_S, 1.0)
+        assert np.allclose(rates, expected, atol=1e-6) and rates[-1] == 1.0
+        device.handle(_key(pygame.K_LEFT, False))
+        assert device.rates(DT)[0] == 0.0                             # released: stops, and the ramp restarts
+        device.handle(_key(pygame.K_LSHIFT, True))
+        device.handle(_key(pygame.K_d, True))
+        assert device.rates(DT)[2] == pytest.approx(FINE * (RAMP_FLOOR + (1 - RAMP_FLOOR) * DT / RAMP_S))
+        device.handle(_key(pygame.K_d, False))
+        device.handle(_key(pygame.K_LSHIFT, False))
+        device.handle(pygame.event.Event(pygame.MOUSEBUTTONDOWN, button=1, pos=(100, 100)))
+        device.handle(pygame.event.Event(pygame.MOUSEMOTION, pos=(70, 130), rel=(-30, 30), buttons=(1, 0, 0)))
+        assert np.allclose(device.rates(DT), [0.5, 0.5, 0.0, 0.0])   # half of 60 px: half speed, two axes
+        device.handle(pygame.event.Event(pygame.MOUSEBUTTONUP, button=1, pos=(70, 130)))
+        device.pads = [_Pad([DEAD_ZONE / 2, -1.0, 0.5, 0.0])]                # drift inside the dead zone is ignored
+        a = device.rates(DT)
+        assert a[0] == 0.0 and a[1] == -1.0 and a[2] == pytest.approx((0.5 - DEAD_ZONE) / (1 - DEAD_ZONE))
+    finally:
+        pygame.quit()
+
+
+def test_play_help_lists_every_control(capsys):
+    from softenv.cli import main
+
+    assert main(["play", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert all(key in out and what in out for key, what in CONTROLS)

@@ -10,8 +10,8 @@ import pytest
 
 from softenv.envs import make_config
 from softenv.training.logs import FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
-from softenv.training.scoring import (COLUMNS, expert_trajectory, load_trajectory, replay, replay_hand, save_trajectory,
-                             score_file, score_hand_log)
+from softenv.training.scoring import (ADVICE, COLUMNS, expert_trajectory, improvements, load_trajectory,
+                                      points_to_gain, replay, replay_hand, save_trajectory, score_file, score_hand_log)
 from softenv.training.trainee import (LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman,
                                       withdrawn)
 
@@ -145,6 +145,27 @@ def test_shipped_device_logs_rank_the_expert_first_and_each_error_costs_its_part
     md = (tmp_path / "levers_on_teeth_score.md").read_text()
     assert "teeth = clip(1 - peak_incisor_force" in md and "peak incisor force" in md
     assert (tmp_path / "levers_on_teeth_score.png").stat().st_size > 1000
+    # what to improve first: each log's advice names its own error; the expert has nothing to improve
+    assert expert["advice"] == [] and max(expert["points_to_gain"].values()) < 0.05
+    assert ADVICE["safety"].format(safe_force=30) in reports["too_forceful"]["advice"]
+    assert ADVICE["smoothness"] in reports["hesitant_tremulous"]["advice"]
+    assert reports["wrong_direction"]["advice"][0] == ADVICE["accuracy"]
+    assert "To improve first: " + ADVICE["accuracy"] in (tmp_path / "wrong_direction_score.md").read_text()
+
+
+def test_points_to_gain_are_the_score_with_one_part_as_good_as_the_experts():
+    """Hand-computed from the formula: 100 accuracy (weighted sum)."""
+    weights = {"accuracy": 0.5, "speed": 0.2, "safety": 0.3}
+    parts = {"accuracy": 0.5, "speed": 1.0, "safety": 0.4}
+    expert = {"accuracy": 1.0, "speed": 0.5, "safety": 1.0}
+    now = 100 * 0.5 * (0.25 + 0.2 + 0.12)
+    gain = points_to_gain(parts, expert, weights)
+    assert gain["accuracy"] == pytest.approx(100 * 1.0 * (0.5 + 0.2 + 0.12) - now)
+    assert gain["speed"] == 0.0                                         # better than the expert: nothing to gain
+    assert gain["safety"] == pytest.approx(100 * 0.5 * (0.25 + 0.2 + 0.3) - now)
+    report = {"points_to_gain": gain, "safe_force_N": 12.0}
+    assert improvements(report) == [ADVICE["accuracy"], ADVICE["safety"].format(safe_force=12.0)]
+    assert "12 N" in improvements(report)[1] and improvements(report, 1) == [ADVICE["accuracy"]]
 
 
 def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it(expert_log):

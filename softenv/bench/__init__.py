@@ -28,6 +28,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "torch": ("softenv.bench.env", "bench_torch"),
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
     "bridge": ("softenv.bench.bridge", "bench_bridge"),
+    "play": ("softenv.bench.play", "bench_play"),
     "gpu": ("softenv.bench.env", "bench_gpu"),          # only with --device cuda
 }
 DEFAULT_SECTIONS = [name for name in SECTIONS if name != "gpu"]

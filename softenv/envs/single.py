@@ -254,6 +254,15 @@ class SoftSphereEnv(gym.Env):
         return self._target_b.copy()
 
     @property
+    def success_error_mm(self) -> float:
+        """The shape error (mm) under which the next step's target counts as reached (``is_success``):
+        ``task.tolerance`` times the target's RMS displacement from rest (floored)."""
+        if self._episode is None:
+            raise RuntimeError("call reset() before reading the target")
+        ti = self._t if self._t < self._last_index else self._last_index
+        return self.world.tolerance * math.sqrt(self._sq_ref[ti] / self.world.n_vertices) * 1e3
+
+    @property
     def target_features(self) -> np.ndarray:
         """The episode's target force features, ``(T, 4)`` (a copy)."""
         if self._episode is None:

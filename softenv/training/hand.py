@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from ..devices.laryngoscope.params import LaryngoscopeParams
-from ..devices.laryngoscope.physics import hand_action
+from .._ops import ScalarOps
+from ..devices.laryngoscope.physics import hand_action, hand_command
 from ..envs import HAPTIC_SCENES
 from ..envs.config import scene_config, scene_sections
 from ..envs.single import SoftSphereEnv
@@ -146,6 +147,18 @@ def action_toward(env: Any, goal: np.ndarray, tol: float = 1e-3) -> np.ndarray:
         v = (goal - now) / dt
         action = np.clip(hand_action(v[0], v[1], v[2], v[3], now[2], p), -1.0, 1.0)
     return action.astype(np.float32)
+
+
+def pose_after(env: Any, action: np.ndarray) -> np.ndarray:
+    """The relative pose (x, z, pitch, y) ``env``'s hand reaches after one control period of ``action``: the
+    command in the hand's frame at the period's start (:func:`hand_command`), each axis stopped at its wall.
+    A rate device (keys, a stick) steers toward it with :func:`action_toward`, as a log's replay does, so
+    its session replays as it was played even where the hand runs into a wall part way through a period."""
+    p = env.device.laryngoscope.params
+    now = relative_hand_pose(env)
+    velocity = np.array(hand_command(np.asarray(action, dtype=np.float64), now[2], p, ScalarOps))
+    low, high = relative_box(p)
+    return np.clip(now + velocity * env.world.config["dynamics"]["dt"], low, high)
 
 
 def _planar_action(v: np.ndarray, wall: np.ndarray, pitch: float, speed: float, tol: float) -> np.ndarray | None:

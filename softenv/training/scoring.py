@@ -70,6 +70,31 @@ def total(parts: dict[str, float], weights: dict[str, float]) -> float:
 
 FORMULA = formula(WEIGHTS, TERMS)
 HAND_FORMULA = formula(HAND_WEIGHTS, HAND_TERMS)
+# each part's advice in a trainee's words: a report names the parts whose shortfall costs most points
+ADVICE = {
+    "accuracy": "End closer to the target shape: press the tongue down and sweep it aside until it fits the outline.",
+    "speed": "Reach the target sooner: insert, lift and sweep in one continuous movement.",
+    "safety": "Press more gently: keep the tongue force under the safe limit ({safe_force:g} N).",
+    "teeth": "Keep the blade off the upper teeth: lift along the handle instead of tipping it back on the incisors.",
+    "smoothness": "Move steadily: one smooth movement instead of stops and corrections.",
+    "view": "Open the view of the glottis: press the back of the tongue down and aside to clear the line of sight.",
+}
+
+
+def points_to_gain(parts: dict[str, float], expert_parts: dict[str, float],
+                   weights: dict[str, float]) -> dict[str, float]:
+    """For each part, the points the score would gain with that part alone as good as the expert's (0 where the
+    trainee's is as good or better)."""
+    now = total(parts, weights)
+    return {k: max(0.0, total({**parts, k: max(parts[k], expert_parts[k])}, weights) - now) for k in weights}
+
+
+def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
+    """The advice for the ``n`` parts whose shortfall against the expert's costs the most points, largest first
+    (fewer where fewer parts fall short)."""
+    gain = report["points_to_gain"]
+    worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
+    return [ADVICE[k].format(safe_force=report["safe_force_N"]) for k in worst]
 
 
 @dataclass
@@ -277,17 +302,22 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
     scene, scene_from = scene_of(path, schema, scene)
+    safe_force = log_config(schema, scene)["reward"]["safe_force"]
     if schema is HAND_LOG:
         parts, trainee, expert = score_hand_log(table, scene, source)
+        expert_parts = hand_score(expert, expert, safe_force, clinical.rest_view_analytic())
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
     else:
         config = make_config(**scene_sections(scene))
         check_ranges(table, config, source)
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
-        parts, formula, weights = score(trainee, expert, config["reward"]["safe_force"]), FORMULA, WEIGHTS
+        parts, expert_parts = score(trainee, expert, safe_force), score(expert, expert, safe_force)
+        formula, weights = FORMULA, WEIGHTS
     report = {"trajectory": printable(str(path)), "log": schema.name, "scene": scene, "scene_from": scene_from, **parts,
-              "weights": weights,
+              "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,
+              "points_to_gain": points_to_gain(parts, expert_parts, weights),
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
+    report["advice"] = improvements(report)
     if out_dir is not None:                 # the three files all or nothing: a failed write leaves none of them
         out = Path(out_dir)
         stem = Path(path).stem
@@ -333,9 +363,11 @@ def _markdown(report: dict[str, Any]) -> str:
              f"({report['log']}), replayed on scene sections `{json.dumps(report['scene'])}` "
              f"(from {report['scene_from']}).\n", "| metric | trainee | expert |", "|---|---|---|",
              *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
-             "| part | weight | value |", "|---|---|---|",
-             *[f"| {k} | {w:g} | {report[k]:.3f} |" for k, w in report["weights"].items()], "",
-             f"Formula: {report['formula']}."]
+             "| part | weight | trainee | expert | points to gain |", "|---|---|---|---|---|",
+             *[f"| {k} | {w:g} | {report[k]:.3f} | {report['expert_parts'][k]:.3f} | {report['points_to_gain'][k]:.1f} |"
+               for k, w in report["weights"].items()], "",
+             "To improve first: " + (" ".join(report["advice"]) or "nothing: every part is as good as the expert's."),
+             "", f"Formula: {report['formula']}."]
     return "\n".join(lines) + "\n"
 
 
