@@ -196,16 +196,21 @@ def cmd_play(args: argparse.Namespace) -> None:
     elif not play.display_available():              # else SDL would run a session nobody sees
         raise ValueError("no display to open a window on (DISPLAY and WAYLAND_DISPLAY are unset): run softenv play "
                          "on a desktop, or pass --headless for a session without a window")
-    bridge = None
+    if args.bridge is not None and args.device != "keys":
+        raise ValueError(f"--bridge and --device {args.device} both drive the hand: give one")
+    bridge = device = None
     if args.bridge is not None:
         bridge = play.open_bridge(*args.bridge)
         host, port = bridge.address
         print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.training.bridge)")
+    elif args.device != "keys":
+        device = play.open_haptic_device(args.device)
     try:
-        play.run(args.seconds, args.out, bridge=bridge, screens=not args.headless)
+        play.run(args.seconds, args.out, bridge=bridge, device=device, screens=not args.headless)
     finally:
-        if bridge is not None:
-            bridge.close()
+        for opened in (bridge, device):
+            if opened is not None:
+                opened.close()
 
 
 def _bridge_address(text: str) -> tuple[str, int]:
@@ -311,6 +316,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--headless", action="store_true",
                    help="no window (SDL's dummy driver) and no start or end screen: the session starts at once and "
                         "ends with its score (a bridge-driven or smoke run)")
+    p.add_argument("--device", choices=["keys", "touch", "forcedimension"], default="keys",
+                   help="what drives the hand: keys, mouse and gamepad (default); a 3D Systems Touch (the touch "
+                        "extra and OpenHaptics) or a Force Dimension arm (the forcedimension extra and its SDK), "
+                        "both untested without the hardware")
     p.add_argument("--bridge", type=_bridge_address, metavar="[HOST:]PORT",
                    help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")

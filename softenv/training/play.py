@@ -30,6 +30,7 @@ import numpy as np
 
 from .bridge import LOOPBACK, BridgeServer
 from .hand import haptic_config, haptic_env, relative_hand_pose, workspace
+from .haptic_devices import BACKENDS, ServoDevice
 from .inputs import BridgeInput, InputDevice, PygameInput
 from .logs import HAND_LOG, save_log
 from .play_view import SIZE, PlayView
@@ -189,6 +190,14 @@ def open_bridge(host: str = LOOPBACK, port: int = 0, scene: dict[str, Any] | Non
         return BridgeServer(workspace(haptic_config(scene)), host, port)
     except OSError as exc:
         raise ValueError(f"--bridge {host}:{port} cannot be listened on: {exc.strerror or exc}") from None
+
+
+def open_haptic_device(kind: str, scene: dict[str, Any] | None = None) -> ServoDevice:
+    """A vendor haptic arm (``touch`` or ``forcedimension``: :mod:`softenv.training.haptic_devices`) mapped
+    into the hand's workspace on ``scene``; refused in one line naming what to install if it cannot open."""
+    if kind not in BACKENDS:
+        raise ValueError(f"--device {kind!r} is not one of {['keys', *BACKENDS]}")
+    return BACKENDS[kind](workspace(haptic_config(scene)))
 
 
 def display_available() -> bool:
