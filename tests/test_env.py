@@ -162,7 +162,7 @@ def test_success_error_mm_is_the_shape_error_where_success_begins():
     target = np.array([0.3, -0.05, 0.6, 0.5], np.float32)
     env.reset(seed=0, options={"target": target})
     with pytest.raises(RuntimeError, match="reset"):
-        gym.make("SoftSphere-v0").unwrapped.success_error_mm
+        float(gym.make("SoftSphere-v0").unwrapped.success_error_mm)
     rest = env.unwrapped.world.force_box.rest_action
     line = env.unwrapped.success_error_mm
     seen = set()

@@ -99,10 +99,10 @@ class TouchDevice(ServoDevice):
 
     def __init__(self, workspace: tuple[np.ndarray, np.ndarray], **mapping: Any) -> None:
         super().__init__(workspace, **mapping)
-        try:                                            # the touch extra, and OpenHaptics' libHD underneath it
-            from pyOpenHaptics import hd
-            from pyOpenHaptics.hd_callback import hd_callback
-            from pyOpenHaptics.hd_device import HapticDevice
+        try:                                            # OpenHaptics' libHD loads when these are imported
+            from pyOpenHaptics import hd                # the touch extra
+            from pyOpenHaptics.hd_callback import hd_callback  # the touch extra
+            from pyOpenHaptics.hd_device import HapticDevice   # the touch extra
         except (ImportError, OSError) as exc:
             raise ValueError(f"a Touch needs pyOpenHaptics and OpenHaptics ({exc}): pip install 'softenv[touch]' and "
                              "install OpenHaptics with the Touch drivers") from None
@@ -128,8 +128,8 @@ class ForceDimensionDevice(ServoDevice):
 
     def __init__(self, workspace: tuple[np.ndarray, np.ndarray], **mapping: Any) -> None:
         super().__init__(workspace, **mapping)
-        try:                                            # the forcedimension extra
-            from forcedimension_core import dhd
+        try:
+            from forcedimension_core import dhd         # the forcedimension extra
         except (ImportError, OSError) as exc:
             raise ValueError(f"a Force Dimension device needs forcedimension-core ({exc}): pip install "
                              "'softenv[forcedimension]' and install the Force Dimension SDK") from None
