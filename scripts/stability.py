@@ -136,6 +136,24 @@ def resident_mb() -> float:
         return int(fh.read().split()[1]) * 4096 / 1e6
 
 
+def early_late(values: list[float]) -> list[float]:
+    """The best of the first two and of the last two tenths of each half (random, then bang-bang)."""
+    return [max(values[0:2]), max(values[3:5]), max(values[5:7]), max(values[8:10])]
+
+
+def cartpole_cpu_rate(steps: int = 20_000) -> float:
+    """Gymnasium's CartPole-v1 steps per CPU second, timed as a soak's tenth is: the in-process reference each
+    tenth's speed is divided by."""
+    env = gym.make("CartPole-v1")
+    env.reset(seed=0)
+    cpu = time.process_time()
+    for k in range(steps):
+        _, _, terminated, truncated, _ = env.step(k % 2)
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.process_time() - cpu)
+
+
 def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[str, Any]:
     """``steps`` steps of ``env_id`` (the single env, or with ``n_envs`` > 1 its batched twin), the first
     half uniform random actions, the second bang-bang. At the end of each tenth, after a collection: the
@@ -150,7 +168,7 @@ def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[
     gc.collect()
     if traced:
         tracemalloc.start()
-    rss, held, rates = [resident_mb()], [], []
+    rss, held, rates, references = [resident_mb()], [], [], []
     t0 = time.perf_counter()
     block = max(steps // 10, 1)
     shape = (4,) if n_envs == 1 else (n_envs, 4)
@@ -163,6 +181,7 @@ def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[
             if n_envs == 1 and (terminated or truncated):       # grow the heap the soak measures
                 env.reset()                            # the batched twin resets its own
         rates.append(n * n_envs / (time.process_time() - cpu))
+        references.append(cartpole_cpu_rate())
         gc.collect()
         held.append(tracemalloc.get_traced_memory()[0] / 1e3 if traced else float(sys.getallocatedblocks()))
         rss.append(resident_mb())
@@ -173,11 +192,14 @@ def soak(env_id: str, steps: int, n_envs: int = 1, traced: bool = True) -> dict[
     # no growth: what is held at the end within 5 % (+ a margin for caches filled once) of the first tenth's,
     # the resident size within 10 MB of the first tenth's; no slowdown: within each half (random, bang-bang:
     # their steps cost differently), the best of its last two tenths at least 90 % of the best of its first
-    # two (a slowdown persists; another process's load comes and goes)
+    # two, each tenth's speed over CartPole-v1's timed right after it (another process's load slows both; a
+    # slowdown of the env's own stays)
     grows = held[-1] > 1.05 * held[0] + (100.0 if traced else 2000.0) or rss[-1] > rss[1] + 10.0
-    halves = [(max(rates[0:2]), max(rates[3:5])), (max(rates[5:7]), max(rates[8:10]))]
+    relative = [rate / reference for rate, reference in zip(rates, references)]
+    early1, late1, early2, late2 = early_late(relative)
+    halves = [(early1, late1), (early2, late2)]
     return {"steps": steps, "n_envs": n_envs, "seconds": seconds, "held": held, "traced": traced, "rss_mb": rss,
-            "rates": rates, "halves": halves, "steady": not grows and all(late >= 0.9 * early for early, late in halves),
+            "rates": rates, "references": references, "halves": halves, "steady": not grows and all(late >= 0.9 * early for early, late in halves),
             "same_episode": bool(np.array_equal(first, last))}
 
 
@@ -298,12 +320,15 @@ def main() -> None:
               "after a collection: the Python memory held (traced: KB allocated since the start and still held, by "
               "tracemalloc; blocks: the interpreter's allocated blocks, `sys.getallocatedblocks()`, where tracemalloc "
               "would slow the pymunk single env 17-fold) and the resident size; env steps per CPU second early and "
-              "late in each half (the best of its first two tenths and of its last two: another process's load comes "
-              "and goes, a slowdown stays). Steady: held memory at the end within 5 % of the first tenth's, resident "
-              "size within 10 MB of the first tenth's, and in each half the late speed at least 90 % of the early.\n",
+              "late in each half (the best of its first two tenths and of its last two), each over CartPole-v1's steps per "
+              "CPU second timed right after that tenth in the same process, under the same tracing (another process's load slows both, a "
+              "slowdown of the env's own stays). Steady: held memory at the end within 5 % of the first tenth's, "
+              "resident size within 10 MB of the first tenth's, and in each half the late speed over CartPole's at "
+              "least 90 % of the early.\n",
               "| soak | envs | steps | wall (s) | held at 1/10, 5/10, 10/10 | resident at start, 1/10, end (MB) | "
-              "env steps / CPU s: random half early, late; bang-bang half early, late | steady | same-seed episode at start and end |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "env steps / CPU s: random half early, late; bang-bang half early, late | the same over CartPole-v1's | "
+              "steady | same-seed episode at start and end |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     soaks = [("SoftSphere-v0", args.soak_steps, 1, True),
              *((env_id, args.haptic_soak_steps, 1, False) for env_id in LARYNGOSCOPE_IDS),
              *((env_id, args.batch_soak_steps, args.batch_envs, True) for env_id in LARYNGOSCOPE_IDS)]
@@ -313,7 +338,8 @@ def main() -> None:
         h, unit = r["held"], "KB traced" if traced else "blocks"
         lines.append(f"| {env_id} | {n_envs:,} | {r['steps']:,} | {r['seconds']:.0f} | {h[0]:,.0f}, {h[4]:,.0f}, "
                      f"{h[-1]:,.0f} {unit} | {r['rss_mb'][0]:.0f}, {r['rss_mb'][1]:.0f}, {r['rss_mb'][-1]:.0f} | "
-                     f"{', '.join(f'{v:,.0f}' for half in r['halves'] for v in half)} | {'yes' if r['steady'] else '**no**'} | "
+                     f"{', '.join(f'{v:,.0f}' for v in early_late(r['rates']))} | "
+                     f"{', '.join(f'{v:.3g}' for half in r['halves'] for v in half)} | {'yes' if r['steady'] else '**no**'} | "
                      f"{'bitwise equal' if r['same_episode'] else '**differs**'} |")
         print(lines[-1], flush=True)
     table, hostile_ok = input_classes()
