@@ -84,6 +84,9 @@ class PlayView:
         self._fit_side_view(env)
         colours = (ramp(np.linspace(0.0, 1.0, SOLID[2] - 40)) * 255).astype(np.uint8)[:, :3]
         self._colour_bar = pygame.surfarray.make_surface(np.repeat(colours[:, None, :], 10, axis=1))
+        self._mesh = pygame.Surface(SOLID[2:], pygame.SRCALPHA)       # made once: drawn on every frame
+        self._shade = pygame.Surface(SIZE, pygame.SRCALPHA)
+        self._shade.fill((30, 30, 40, 110))
         self.drawn: dict[str, Rect] = {}
         self.last_forces: dict[str, float] = {}             # what the gauges showed last (N)
         self._labels: list[tuple[str, Any, tuple[int, int], tuple[int, int, int], str | None]] = []
@@ -244,10 +247,10 @@ class PlayView:
         faces, colours = shaded_faces(vertices, self.triangles, error_mm, self.view3d, ramp, 0.0, self.error_top_mm)
         for face, colour in zip(screen_of(faces), (colours[:, :3] * 255).astype(int)):
             pg.draw.polygon(self.screen, colour, face)
-        mesh = pg.Surface(SIZE, pg.SRCALPHA)               # the target's mesh half transparent over the tongue
-        for (p, q) in screen_of(visible_edges(self.target, self.triangles, self.view3d)):
-            pg.draw.line(mesh, (*TARGET, 110), p, q, 1)
-        self.screen.blit(mesh, (0, 0))
+        self._mesh.fill((0, 0, 0, 0))                     # the target's mesh half transparent over the tongue
+        for (p, q) in screen_of(visible_edges(self.target, self.triangles, self.view3d)) - (x0, y0):
+            pg.draw.line(self._mesh, (*TARGET, 110), p, q, 1)
+        self.screen.blit(self._mesh, (x0, y0))
         self.drawn["target wireframe"] = (x0 + 10, y0 + 24, w - 20, h - 60)
         bar = (x0 + 20, y0 + h - 30)
         self.screen.blit(self._colour_bar, bar)
@@ -259,12 +262,13 @@ class PlayView:
         self._panel(GAUGES, "Forces (N)")
         x0, y0 = GAUGES[0] + 14, GAUGES[1] + 34
         hand = float(np.linalg.norm(info["haptic_force_N"])) if "haptic_force_N" in info else 0.0
-        gauges = [("tongue", device["tongue_force"], self.max_force_N, self.safe_N, f"safe {self.safe_N:g}",
+        gauges = [("tongue", "tongue", device["tongue_force"], self.max_force_N, self.safe_N, f"safe {self.safe_N:g}",
                    (200, 80, 90)),
-                  ("incisors", device["incisor_force"], 2 * self.incisor_limit_N, self.incisor_limit_N,
+                  ("incisors", "incisors", device["incisor_force"], 2 * self.incisor_limit_N, self.incisor_limit_N,
                    f"limit {self.incisor_limit_N:g}", (200, 120, 40)),
-                  ("hand (rendered)", hand, 2 * self.incisor_limit_N, None, "", HAND)]
-        for i, (label, value, top, limit, limit_label, colour) in enumerate(gauges):
+                  ("hand", "hand (rendered)", hand, 2 * self.incisor_limit_N, None, "", HAND)]
+        for i, (key, label, value, top, limit, limit_label, colour) in enumerate(gauges):
+            self.last_forces[key] = value
             self._gauge(f"gauge:{label}", label, value, top, limit, limit_label, colour, (x0, y0 + 86 * i))
 
     def _gauge(self, name: str, label: str, value: float, top: float, limit: float | None, limit_label: str,
@@ -272,7 +276,6 @@ class PlayView:
         pg = self.pg
         x, y = at
         width = GAUGES[2] - 40
-        self.last_forces[label.split(" ")[0]] = value
         over = limit is not None and value > limit
         self._text(f"{label}: {value:5.1f} N", (x, y), 24, colour=DANGER if over else INK)
         pg.draw.rect(self.screen, (228, 228, 228), (x, y + 22, width, 18))
@@ -364,9 +367,7 @@ class PlayView:
         self._text(title, (rect[0] + 8, rect[1] + 6), 22)
 
     def _card(self, rect: Rect) -> Rect:
-        shade = self.pg.Surface(SIZE, self.pg.SRCALPHA)
-        shade.fill((30, 30, 40, 110))
-        self.screen.blit(shade, (0, 0))
+        self.screen.blit(self._shade, (0, 0))
         self.pg.draw.rect(self.screen, PANEL, rect, border_radius=10)
         self.pg.draw.rect(self.screen, (90, 90, 100), rect, 2, border_radius=10)
         return rect
