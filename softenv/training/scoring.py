@@ -302,13 +302,13 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
     scene, scene_from = scene_of(path, schema, scene)
-    safe_force = log_config(schema, scene)["reward"]["safe_force"]
+    config = log_config(schema, scene)
+    safe_force = config["reward"]["safe_force"]
     if schema is HAND_LOG:
         parts, trainee, expert = score_hand_log(table, scene, source)
         expert_parts = hand_score(expert, expert, safe_force, clinical.rest_view_analytic())
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
     else:
-        config = make_config(**scene_sections(scene))
         check_ranges(table, config, source)
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
         parts, expert_parts = score(trainee, expert, safe_force), score(expert, expert, safe_force)
