@@ -106,8 +106,10 @@ def main() -> None:
         mean, lo, hi = bootstrap(scores[levels == level])
         share = level / max(args.levels - 1, 1)
         rows.append(f"| {args.levels - 1 - level} | {share:.2f} | {mean:.1f} [{lo:.1f}, {hi:.1f}] | {scores[levels == level].min():.1f} |")
-    graded = {name: [score_hand_log(degrade(expert_log, **{name: share * WORST.get(name, 1.0)}), expert=expert)[0][part]
-                     for share in SHARES] for name, part in LOWERS.items()}
+    runs = {name: [score_hand_log(degrade(expert_log, **{name: share * WORST.get(name, 1.0)}), expert=expert)
+                   for share in SHARES] for name in LOWERS}
+    graded = {name: [parts_[LOWERS[name]] for parts_, _, _ in results] for name, results in runs.items()}
+    lever_share = [replay.clinical["lever_share"] for _, replay, _ in runs["lever"]]
     single, alone = [], []
     for name, part in LOWERS.items():
         amount = WORST.get(name, 1.0)
@@ -145,7 +147,12 @@ def main() -> None:
           "lowers: every part falls as its error grows, never rises.\n",
           "| error | part | " + " | ".join(f"{x:g}" for x in SHARES) + " |", "|---|---|" + "---|" * len(SHARES),
           *[f"| {name} | {LOWERS[name]} | " + " | ".join(f"{v:.3f}" for v in values) + " |"
-            for name, values in graded.items()], "",
+            for name, values in graded.items()],
+          "| lever | lever share (clinical) | " + " | ".join(f"{v:.3f}" for v in lever_share) + " |", "",
+          "The lever share is the share of the hand's moment about the incisal edge applied while the blade bears on "
+          "the incisors (`softenv.clinical`): 0 while the hand presses down along the handle; once the hand stops "
+          "pressing down and turns the blade, the flange comes to bear on the teeth, the fulcrum of the lever, and "
+          "the share jumps to about 1, with the incisor force that empties the teeth part.\n",
           "Against published clinical data (`softenv.training.profiles`): each profile degrades the expert's log by "
           "hesitation, overshoot and tremor until its time to target, mean tongue force and hand path are the "
           "published group's ratios to its experts' (found by bisection; what it reached beside what was asked). "

@@ -18,6 +18,16 @@ Smoothness (of the hand's speed, sampled at the control rate ``fs``):
 Both are NaN for a hand that never moved or fewer than 3 speed samples (the start and 2 steps):
 smoothness is undefined there, not perfect.
 
+Levering (``lever_share``): the share of the hand's moment about the incisal edge (the wrist's plus
+that of its force at the grip, in absolute value, summed over the steps) applied while the blade
+bears on the incisors. A blade that presses the tongue along the handle, clear of the teeth, scores
+0. A blade pivoted on the teeth to press the tongue with its tip uses them as the fulcrum of a lever:
+in equilibrium the hand's moment about the incisal edge then balances the tongue's (the incisors'
+own force passes through the edge, up to its friction on the round bar), so every newton-metre the
+hand turns the blade by is levered on the teeth, and a trainee who only levers scores 1. Resting the
+blade on the teeth with nothing to turn against applies no moment about them: that is pressing on
+the teeth, caught by the incisor force and contact time, not levering.
+
 The glottic-view proxy (a POGO-like percentage of glottic opening). In the sagittal plane ``y = 0``
 (``+x`` toward the mouth, ``+z`` up; the tongue's rest centre at the origin, radius ``R``), the
 laryngoscopist's eye sits at ``EYE = (3.0, 1.6) R``, in front of and above the tongue, and the glottic
@@ -128,8 +138,8 @@ class ClinicalRecorder:
     """A log of ``n`` devices' episodes, one row per control step, and their clinical metrics.
 
     Each step writes per-device :data:`COLUMNS`: tongue and incisor force (N), the hand's position
-    (m), and the two moments about the incisors (N m): the wrist's (levering: the handle rotated
-    about the teeth) and that of the hand's force at the grip (lifting along the handle). Row 0 holds
+    (m), and the two parts of the hand's moment about the incisal edge (N m): the wrist's (the rotary
+    coupling) and that of the hand's force at the grip. Row 0 holds
     the start pose. :meth:`summary` computes everything from one device's rows, so one env and the
     batched twin's env ``i`` get the same numbers bit for bit.
     """
@@ -164,17 +174,19 @@ def episode_metrics(log: np.ndarray, dt: float, view_pct: float) -> dict[str, fl
     steps = len(log) - 1
     duration = steps * dt
     rows = log[1:]
-    tongue, incisor, wrist, lift = rows[:, 0], rows[:, 1], np.abs(rows[:, 5]), np.abs(rows[:, 6])
+    tongue, incisor = rows[:, 0], rows[:, 1]
+    # the hand's whole moment about the incisal edge: the wrist's plus that of its force at the grip
+    moment = np.abs(rows[:, 5] + rows[:, 6])
     moves = np.sqrt(np.sum(np.diff(log[:, 2:5], axis=0) ** 2, axis=1))
     speed = np.concatenate([[0.0], moves / dt])                 # the hand at rest before the episode
-    moments = float(np.sum(wrist) + np.sum(lift))
+    moments = float(np.sum(moment))
     return {"duration_s": duration,
             "peak_tongue_force_N": float(tongue.max(initial=0.0)),
             "mean_tongue_force_N": float(np.mean(tongue)) if steps else 0.0,
             "tongue_force_time_Ns": float(np.sum(tongue) * dt),
             "peak_incisor_force_N": float(incisor.max(initial=0.0)),
             "incisor_contact_s": float(np.count_nonzero(incisor > 0.0) * dt),
-            "lever_share": float(np.sum(wrist)) / moments if moments > 0.0 else 0.0,
+            "lever_share": float(np.sum(moment[incisor > 0.0])) / moments if moments > 0.0 else 0.0,
             "hand_path_m": float(np.sum(moves)),
             "sparc": sparc(speed, 1.0 / dt), "ldlj": ldlj(speed, 1.0 / dt),
             "glottic_view_pct": float(view_pct)}

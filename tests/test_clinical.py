@@ -14,7 +14,9 @@ from gymnasium.vector import AutoresetMode
 
 import softenv  # noqa: F401  (registers the ids)
 from softenv import clinical
+from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION
 from softenv.geometry import make_mesh
+from softenv.training.hand import action_toward, haptic_env
 
 
 def min_jerk_speed(n: int) -> np.ndarray:
@@ -109,7 +111,8 @@ def test_episode_metrics_of_a_known_log():
     assert m["peak_tongue_force_N"] == 3.0 and m["mean_tongue_force_N"] == pytest.approx(1.5)
     assert m["tongue_force_time_Ns"] == pytest.approx(6.0 * dt)
     assert m["peak_incisor_force_N"] == 5.0 and m["incisor_contact_s"] == pytest.approx(2 * dt)
-    assert m["lever_share"] == pytest.approx(2.0 / 8.0)
+    # the hand's moment about the incisal edge |wrist + lift| = 3, 1, 2, 0: of its 6 N m, 1 while on the teeth
+    assert m["lever_share"] == pytest.approx(1.0 / 6.0)
     assert m["hand_path_m"] == pytest.approx(0.05)
     assert m["glottic_view_pct"] == 50.0
 
@@ -188,3 +191,39 @@ def test_batched_twin_reports_what_single_envs_report(mode):
         assert x["clinical"][key][0] == y["clinical"][key][0] or (
             math.isnan(x["clinical"][key][0]) and math.isnan(y["clinical"][key][0]))
         np.testing.assert_allclose(x["clinical"][key], y["clinical"][key], rtol=1e-6, atol=1e-9)
+
+
+def test_lever_share_is_1_for_a_blade_turned_on_the_teeth_and_0_for_a_press_clear_of_them():
+    """Known answers: a moment applied only while the incisors bear the blade is all levering, one
+    applied clear of them none, however large; a moment that the wrist and the grip's force cancel
+    is no moment."""
+    log = np.zeros((4, len(clinical.COLUMNS)))
+    log[1:, 5] = [2.0, 2.0, 2.0]
+    assert clinical.episode_metrics(log, 0.02, 0.0)["lever_share"] == 0.0          # pressing clear of the teeth
+    log[1:, 1] = 4.0
+    assert clinical.episode_metrics(log, 0.02, 0.0)["lever_share"] == 1.0          # every step on them
+    log[1:, 6] = -2.0
+    assert clinical.episode_metrics(log, 0.02, 0.0)["lever_share"] == 0.0          # no moment at all
+
+
+def test_the_hands_moment_about_the_incisors_balances_the_tongues_when_levering():
+    """Statics as the independent truth: a hand that turns the blade tip-down with its flange on the
+    incisors (a lever on the teeth) comes to rest with its moment about the incisal edge equal and
+    opposite to the tongue's force P n at the contact point, up to the incisors' friction on their
+    round bar (at most mu N r, mu the product of the two shapes' frictions as pymunk takes it); and the episode's lever share is then near 1."""
+    env = haptic_env(None, 150)
+    env.reset(seed=0)
+    laryngoscope = env.device.laryngoscope
+    for k in range(150):                                     # raise the hand 5 mm, turn it 0.4 rad, hold
+        ramp = min(1.0, (k + 1) / 50)
+        info = env.step(action_toward(env, np.array([0.0, 0.005 * ramp, 0.4 * ramp, 0.0])))[4]
+    P, _, cx, cy, incisor = laryngoscope.state().contact[0]
+    assert P > 20.0 and incisor > 5.0                          # on the tongue and on the teeth
+    ix, iy = laryngoscope.params.incisor_segment[0]
+    norm = math.hypot(cx, cy)
+    tongue_moment = (cx - ix) * P * cy / norm - (cy - iy) * P * cx / norm
+    row = env.device.clinical.log[env.device.clinical.steps[0], 0]
+    hand_moment = row[5] + row[6]
+    assert abs(hand_moment) > 1.0
+    assert abs(hand_moment + tongue_moment) < SHAPE_FRICTION ** 2 * incisor * INCISOR_RADIUS
+    assert info["clinical"]["lever_share"] > 0.9

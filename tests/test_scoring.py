@@ -137,8 +137,10 @@ def test_shipped_device_logs_rank_the_expert_first_and_each_error_costs_its_part
     assert expert["score"] > 95 and expert["log"] == "hand poses"
     for name, report in reports.items():
         assert report["score"] < expert["score"] - 5, name
-    assert reports["levers_on_teeth"]["teeth"] < 1.0 and reports["levers_on_teeth"]["metrics"]["clinical"][
-        "peak_incisor_force_N"] > 0.0 and expert["metrics"]["clinical"]["peak_incisor_force_N"] == 0.0
+    lever, clear = reports["levers_on_teeth"]["metrics"]["clinical"], expert["metrics"]["clinical"]
+    assert reports["levers_on_teeth"]["teeth"] < 1.0 and lever["peak_incisor_force_N"] > 0.0
+    assert clear["peak_incisor_force_N"] == 0.0
+    assert lever["lever_share"] > 0.9 and clear["lever_share"] == 0.0          # levering, and not
     assert reports["too_forceful"]["safety"] < expert["safety"]
     assert reports["hesitant_tremulous"]["smoothness"] < 0.6 and reports["hesitant_tremulous"]["speed"] < 0.6
     assert reports["wrong_direction"]["accuracy"] < 0.7

@@ -9,7 +9,7 @@ the errors a trainee makes, each by an amount that grades it (0 = none):
 |---|---|---|
 | ``tremor`` | mm | an 8 Hz tremor (physiological tremor is 8-12 Hz) of that amplitude in x and z, half of it sideways, and 0.01 rad per mm of pitch |
 | ``hesitation`` | s | three pauses of that length (at 25, 50 and 75 % of the expert's movement), the hand held still |
-| ``lever`` | rad | the handle rocked back (tip up) by that angle before the lift, which comes late (at 15-30 % of the procedure instead of at once): the flange levers on the incisors |
+| ``lever`` | rad | the press done by turning the blade instead of lowering the hand: the handle turned tip-down by that angle beyond the expert's, the hand's descent cut by its share of 0.3 rad (from 0.3 rad on, the hand rises 5 mm instead). From about 0.25 rad the flange bears on the upper incisors, the fulcrum of a lever that presses the tongue (``lever_share`` near 1) |
 | ``overshoot`` | mm | the lift pressed that much deeper than the expert's |
 | ``direction`` | 0-1 | the sideways path mirrored by that share (1: sweeps left instead of right) |
 
@@ -32,6 +32,7 @@ from .logs import HAND_LOG, Schema, check_table
 
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
+LEVER_FULL_RAD, LEVER_RISE_M = 0.3, 0.005   # from this lever on, the hand no longer presses down but rises
 
 
 def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0) -> np.ndarray:
@@ -79,9 +80,9 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
     # lift: the expert's hand goes down (z) between leaving the start and 40 % of the procedure
     pose[:, 3] *= 1.0 - 2.0 * direction
     if lever > 0.0:
-        rocked = ramp(0.0, 0.12) - ramp(0.25, 0.35)
-        pose[:, 2] = pose[:, 2] * ramp(0.25, 0.35) - lever * rocked
-        pose[:, 1] *= 1.0 - min(1.0, lever / 0.1) * (1.0 - ramp(0.15, 0.3))
+        share, pivot = min(1.0, lever / LEVER_FULL_RAD), ramp(0.0, 0.2)
+        pose[:, 1] += (share * LEVER_RISE_M * pivot - pose[:, 1]) * share
+        pose[:, 2] += lever * pivot
     pose[:, 1] -= overshoot * 1e-3 * ramp(0.1, 0.4)
     if tremor > 0.0:
         phase = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, 4)

@@ -39,6 +39,7 @@ from ..presets import PRESETS, HapticPreset
 SPRING_LENGTH = 1.0           # m, rest length of the two coupling springs
 START_GAP = 0.005             # m between the blade's underside and the tongue at the start
 INCISOR_RADIUS = 0.004        # m
+SHAPE_FRICTION = 0.3          # of the blade's and the incisors' shapes (pymunk's contact takes their product)
 INCISOR_CLEARANCE = 0.003     # m above the flange in the start pose
 INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge

@@ -33,7 +33,7 @@ from ..._ops import ArrayOps, PhysicsOps
 from ..contact import TongueContact
 from ..presets import render_components
 from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, SPEED_SCALE, SPIN_SCALE
-from .params import INCISOR_RADIUS, SPRING_LENGTH, LaryngoscopeParams
+from .params import INCISOR_RADIUS, SHAPE_FRICTION, SPRING_LENGTH, LaryngoscopeParams
 from .physics import coupling_force, grip_offset, nearest_point, substep_constants
 
 BLADE_TYPE, INCISOR_TYPE = 1, 2
@@ -75,10 +75,10 @@ class DeviceSpace:
             # one shape a side, so one contact a device: with two, the solver's order of them would
             # depend on the spatial index's history, and a rebuilt device would not continue bit for bit
             shape = pymunk.Poly(blade, p.outline)
-            shape.collision_type, shape.friction, shape.elasticity = BLADE_TYPE, 0.3, 0.0
+            shape.collision_type, shape.friction, shape.elasticity = BLADE_TYPE, SHAPE_FRICTION, 0.0
             (ax, ay), (bx, by) = p.incisor_segment
             incisor = pymunk.Segment(self.space.static_body, (ox + ax, oy + ay), (ox + bx, oy + by), INCISOR_RADIUS)
-            incisor.collision_type, incisor.friction, incisor.elasticity = INCISOR_TYPE, 0.3, 0.0
+            incisor.collision_type, incisor.friction, incisor.elasticity = INCISOR_TYPE, SHAPE_FRICTION, 0.0
             self.space.add(hand, blade, shape, incisor, *virtual_coupling(hand, blade, p.grip, p))
             self.hands.append(hand)
             self.blades.append(blade)
