@@ -41,6 +41,8 @@ class PhysicsOps(Ops, Protocol):
 
     def sin(self, x: Any, /) -> Any: ...
 
+    def exp(self, x: Any, /) -> Any: ...
+
     def atan2(self, y: Any, x: Any, /) -> Any: ...
 
     def asin(self, x: Any, /) -> Any: ...
@@ -58,6 +60,7 @@ class ScalarOps:
     sqrt = staticmethod(math.sqrt)
     cos = staticmethod(math.cos)
     sin = staticmethod(math.sin)
+    exp = staticmethod(math.exp)
     atan2 = staticmethod(math.atan2)
     asin = staticmethod(math.asin)
 
@@ -92,6 +95,7 @@ class ArrayOps:
     sqrt = staticmethod(np.sqrt)
     cos = staticmethod(np.cos)
     sin = staticmethod(np.sin)
+    exp = staticmethod(np.exp)
 
     @staticmethod
     def atan2(y: Any, x: Any) -> np.ndarray:

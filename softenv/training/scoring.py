@@ -75,7 +75,7 @@ ADVICE = {
     "accuracy": "End closer to the target shape: press the tongue down and sweep it aside until it fits the outline.",
     "speed": "Reach the target sooner: insert, lift and sweep in one continuous movement.",
     "safety": "Press more gently: keep the tongue force under the safe limit ({safe_force:g} N).",
-    "teeth": "Keep the blade off the upper teeth: lift along the handle instead of tipping it back on the incisors.",
+    "teeth": "Keep the blade off the upper teeth: lift along the handle instead of levering the blade on the incisors.",
     "smoothness": "Move steadily: one smooth movement instead of stops and corrections.",
     "view": "Open the view of the glottis: press the back of the tongue down and aside to clear the line of sight.",
 }

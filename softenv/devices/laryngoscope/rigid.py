@@ -1,0 +1,111 @@
+"""The blade and the virtual coupling as Chipmunk steps them, written against ``ops`` (floats or arrays).
+
+A first piece of the laryngoscope on arrays (issue 37): one ``cpSpaceStep`` of the blade (a dynamic
+body) pulled by the hand (a kinematic body) through :func:`~.space.virtual_coupling`'s two
+``DampedSpring`` s and its ``DampedRotarySpring``, under an external force and torque (the tongue's,
+computed outside the space as today), in Chipmunk's order of operations:
+
+1. positions from the velocities the bodies hold (symplectic Euler; the hand moves by its own);
+2. each spring's explicit impulse (``preStep``: spring force times ``h``), from the new positions;
+3. velocities from the external force and torque (no gravity, no space damping);
+4. ``iterations`` passes of each spring's implicit damping impulse (``applyImpulse``), the springs in
+   the order they were added.
+
+Chipmunk's expressions are kept as written (``n = delta * (1 / dist)``, the accumulated impulse
+clamped and differenced), so the same IEEE operations run in the same order. The incisors' contact
+(Chipmunk's collision and its impulse solver) is not here yet: :func:`coupling_step` agrees with
+pymunk while the blade is clear of the teeth (``tests/test_laryngoscope_rigid.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..._ops import PhysicsOps
+from .params import SPRING_LENGTH, LaryngoscopeParams
+
+
+@dataclass(frozen=True)
+class Coupling:
+    """What one step of the coupled blade reads: the blade's inverse mass and moment, the grip (the
+    springs' anchor on the blade, body frame), the springs' stiffness and damping."""
+
+    m_inv: float
+    i_inv: float
+    grip: tuple[float, float]
+    k: float
+    c: float
+    k_rot: float
+    c_rot: float
+
+    @classmethod
+    def of(cls, p: LaryngoscopeParams) -> Coupling:
+        return cls(1.0 / p.mass, 1.0 / p.moment, p.grip, p.coupling_stiffness, p.coupling_damping,
+                   p.rotational_stiffness, p.rotational_damping)
+
+
+# the hand-frame anchors of the two springs, in the order virtual_coupling adds them
+HAND_ANCHORS = ((-SPRING_LENGTH, 0.0), (0.0, SPRING_LENGTH))
+
+
+def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[Any, Any, Any],
+                  force: tuple[Any, Any, Any], h: float, c: Coupling, iterations: int,
+                  ops: PhysicsOps) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+    """One Chipmunk step of ``h`` seconds: ``blade`` (x, y, angle, vx, vy, spin), ``hand`` (x, y, pitch)
+    moving at ``hand_v`` (vx, vy, spin), ``force`` (fx, fy, torque) on the blade's centre of mass.
+    Returns the blade's and the hand's new state, as pymunk's ``space.step(h)`` leaves them."""
+    px, py, a, vx, vy, w = blade
+    gx, gy, pitch = hand
+    hvx, hvy, hw = hand_v
+    fx, fy, torque = force
+    # 1. positions (cpBodyUpdatePosition; no bias velocities without contacts)
+    gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
+    px, py, a = px + vx * h, py + vy * h, a + w * h
+    ca, sa, cp, sp = ops.cos(a), ops.sin(a), ops.cos(pitch), ops.sin(pitch)
+    qx, qy = c.grip
+    r2x, r2y = ca * qx + -sa * qy, sa * qx + ca * qy
+    # 2. the springs' explicit impulses (preStep); the hand is kinematic: impulses leave it as it is
+    springs = []
+    for ax, ay in HAND_ANCHORS:
+        r1x, r1y = cp * ax + -sp * ay, sp * ax + cp * ay
+        dx, dy = (px + r2x) - (gx + r1x), (py + r2y) - (gy + r1y)
+        dist = ops.sqrt(dx * dx + dy * dy)
+        inv = 1.0 / dist
+        nx, ny = dx * inv, dy * inv
+        rcn = r2x * ny - r2y * nx
+        k = c.m_inv + c.i_inv * rcn * rcn
+        n_mass = 1.0 / k
+        v_coef = 1.0 - ops.exp(-c.c * h * k)
+        j = (SPRING_LENGTH - dist) * c.k * h
+        vx, vy = vx + nx * j * c.m_inv, vy + ny * j * c.m_inv
+        w = w + c.i_inv * (r2x * (ny * j) - r2y * (nx * j))
+        springs.append([r1x, r1y, nx, ny, n_mass, v_coef, 0.0, j])      # ..., target_vrn, jAcc
+    i_sum = 1.0 / c.i_inv
+    w_coef = 1.0 - ops.exp(-c.c_rot * h * c.i_inv)
+    j_rot = ((pitch - a) - 0.0) * c.k_rot * h
+    w = w + j_rot * c.i_inv
+    target_wrn = 0.0
+    # 3. velocities (cpBodyUpdateVelocity: the space's damping is 1, gravity 0)
+    vx, vy = vx * 1.0 + (0.0 + fx * c.m_inv) * h, vy * 1.0 + (0.0 + fy * c.m_inv) * h
+    w = w * 1.0 + torque * c.i_inv * h
+    # 4. the implicit damping impulses (applyImpulse), springs in the order they were added
+    for _ in range(iterations):
+        for s in springs:
+            r1x, r1y, nx, ny, n_mass, v_coef, target, acc = s
+            rel_x = (vx + -r2y * w) - (hvx + -r1y * hw)
+            rel_y = (vy + r2x * w) - (hvy + r1x * hw)
+            vrn = rel_x * nx + rel_y * ny
+            v_damp = (target - vrn) * v_coef
+            s[6] = vrn + v_damp
+            j = (acc + v_damp * n_mass) - acc       # the accumulated impulse clamped (to +-inf), differenced
+            s[7] = acc + j
+            vx, vy = vx + nx * j * c.m_inv, vy + ny * j * c.m_inv
+            w = w + c.i_inv * (r2x * (ny * j) - r2y * (nx * j))
+        wrn = hw - w
+        w_damp = (target_wrn - wrn) * w_coef
+        target_wrn = wrn + w_damp
+        j = j_rot - (j_rot - w_damp * i_sum)
+        j_rot = j_rot - j
+        w = w - j * c.i_inv
+    return (px, py, a, vx, vy, w), (gx, gy, pitch)
