@@ -17,8 +17,10 @@ from softenv.training.hand import haptic_config
 H = 1e-3                                        # the device's substep at the default scene
 
 
-def pymunk_device(p: LaryngoscopeParams) -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
-    space = pymunk.Space()
+def pymunk_device(p: LaryngoscopeParams, threaded: bool) -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
+    space = pymunk.Space(threaded=threaded)        # threaded: Chipmunk's hasty space, as the batch steps it
+    if threaded:
+        space.threads = 1
     space.iterations = SOLVER_ITERATIONS
     hand, blade = pymunk.Body(body_type=pymunk.Body.KINEMATIC), pymunk.Body(p.mass, p.moment)
     hand.position, blade.position = p.grip_start, p.body_start
@@ -34,18 +36,18 @@ def pymunk_step(device: tuple[pymunk.Space, pymunk.Body, pymunk.Body], hand_v: n
     return [*blade.position, blade.angle, *blade.velocity, blade.angular_velocity]
 
 
-@pytest.mark.parametrize("stiff", [False, True])
-def test_the_coupled_blade_steps_as_pymunk_steps_it_bit_for_bit(stiff):
+@pytest.mark.parametrize("stiff, threaded", [(False, False), (True, True)])
+def test_the_coupled_blade_steps_as_pymunk_steps_it_bit_for_bit(stiff, threaded):
     """Random hand velocities (0.1 m/s, 0.5 rad/s) and external forces (10 N, 0.3 N m: the tongue's
     scale) over 1,000 substeps, on Python floats and on arrays of 16 devices; the stiff case puts
-    the coupling at 10 times its stiffness and damping."""
+    the coupling at 10 times its stiffness and damping, in Chipmunk's hasty space."""
     config = haptic_config(None)
     if stiff:
         config["device"] = {**config["device"], **{key: 10.0 * config["device"][key] for key in
                             ("coupling_stiffness", "coupling_damping", "rotational_stiffness", "rotational_damping")}}
     p = LaryngoscopeParams.from_config(config)
     c, n = Coupling.of(p), 16
-    devices = [pymunk_device(p) for _ in range(n)]
+    devices = [pymunk_device(p, threaded) for _ in range(n)]
     rng = np.random.default_rng(1)
     one = ((*p.body_start, 0.0, 0.0, 0.0, 0.0), (*p.grip_start, 0.0))
     many = tuple(tuple(np.full(n, v) for v in part) for part in one)
