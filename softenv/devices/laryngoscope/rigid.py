@@ -13,8 +13,9 @@ computed outside the space as today), in Chipmunk's order of operations:
 
 Chipmunk's expressions are kept as written (``n = delta * (1 / dist)``, the accumulated impulse
 clamped and differenced), so the same IEEE operations run in the same order. The incisors' contact
-(Chipmunk's collision and its impulse solver) is not here yet: :func:`coupling_step` agrees with
-pymunk while the blade is clear of the teeth (``tests/test_laryngoscope_rigid.py``).
+(Chipmunk's collision, :mod:`.incisors`, and its impulse solver, not written yet) is not here:
+:func:`coupling_step` equals pymunk while the blade is clear of the teeth
+(``tests/test_laryngoscope_arrays.py``).
 """
 
 from __future__ import annotations

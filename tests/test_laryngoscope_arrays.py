@@ -1,0 +1,108 @@
+"""The laryngoscope's pieces on arrays against pymunk itself. The blade and the virtual coupling
+(softenv.devices.laryngoscope.rigid): a space holding only the hand, the blade and the coupling, stepped
+with the same hand velocities and external forces, must leave the blade in the same state bit for bit,
+step after step. The blade against the incisors (softenv.devices.laryngoscope.incisors): the same
+contacts as Chipmunk's own collision (cpShapesCollide), bit for bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pymunk
+import pytest
+from pymunk._chipmunk import lib
+
+from softenv._ops import ArrayOps, ScalarOps
+from softenv.devices.laryngoscope.incisors import collide, polygon_planes, transformed
+from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
+from softenv.devices.laryngoscope.rigid import Coupling, coupling_step
+from softenv.devices.laryngoscope.space import SOLVER_ITERATIONS, virtual_coupling
+from softenv.training.hand import haptic_config
+
+H = 1e-3                                        # the device's substep at the default scene
+
+
+def pymunk_device(p: LaryngoscopeParams, threaded: bool) -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
+    space = pymunk.Space(threaded=threaded)        # threaded: Chipmunk's hasty space, as the batch steps it
+    if threaded:
+        space.threads = 1
+    space.iterations = SOLVER_ITERATIONS
+    hand, blade = pymunk.Body(body_type=pymunk.Body.KINEMATIC), pymunk.Body(p.mass, p.moment)
+    hand.position, blade.position = p.grip_start, p.body_start
+    space.add(hand, blade, pymunk.Poly(blade, p.outline), *virtual_coupling(hand, blade, p.grip, p))
+    return space, hand, blade
+
+
+def pymunk_step(device: tuple[pymunk.Space, pymunk.Body, pymunk.Body], hand_v: np.ndarray, force: np.ndarray) -> list[float]:
+    space, hand, blade = device
+    hand.velocity, hand.angular_velocity = (float(hand_v[0]), float(hand_v[1])), float(hand_v[2])
+    blade.force, blade.torque = (float(force[0]), float(force[1])), float(force[2])
+    space.step(H)
+    return [*blade.position, blade.angle, *blade.velocity, blade.angular_velocity]
+
+
+@pytest.mark.parametrize("stiff, threaded", [(False, False), (True, True)])
+def test_the_coupled_blade_steps_as_pymunk_steps_it_bit_for_bit(stiff, threaded):
+    """Random hand velocities (0.1 m/s, 0.5 rad/s) and external forces (10 N, 0.3 N m: the tongue's
+    scale) over 1,000 substeps, on Python floats and on arrays of 16 devices; the stiff case puts
+    the coupling at 10 times its stiffness and damping, in Chipmunk's hasty space."""
+    config = haptic_config(None)
+    if stiff:
+        config["device"] = {**config["device"], **{key: 10.0 * config["device"][key] for key in
+                            ("coupling_stiffness", "coupling_damping", "rotational_stiffness", "rotational_damping")}}
+    p = LaryngoscopeParams.from_config(config)
+    c, n = Coupling.of(p), 16
+    devices = [pymunk_device(p, threaded) for _ in range(n)]
+    rng = np.random.default_rng(1)
+    one = ((*p.body_start, 0.0, 0.0, 0.0, 0.0), (*p.grip_start, 0.0))
+    many = tuple(tuple(np.full(n, v) for v in part) for part in one)
+    for _ in range(1000):
+        hand_v, force = rng.normal(0, [0.1, 0.1, 0.5], (n, 3)), rng.normal(0, [10.0, 10.0, 0.3], (n, 3))
+        reference = np.array([pymunk_step(d, hand_v[i], force[i]) for i, d in enumerate(devices)])
+        one = coupling_step(*one, tuple(hand_v[0].tolist()), tuple(force[0].tolist()), H, c, SOLVER_ITERATIONS, ScalarOps)
+        many = coupling_step(*many, tuple(hand_v.T), tuple(force.T), H, c, SOLVER_ITERATIONS, ArrayOps)
+        assert list(one[0]) == reference[0].tolist()
+        assert np.array_equal(np.stack(many[0], axis=1), reference)
+    assert np.ptp(reference[:, 0]) > 1e-3              # the devices went their own ways
+
+
+def test_the_blade_meets_the_incisors_where_chipmunk_finds_it_bit_for_bit():
+    """4,000 blade poses around the incisors (2 cm back and forth, 2 mm below to 12 mm into them,
+    +-0.4 rad): where the cores stay apart (the blade less than the incisors' 4 mm radius into them, as
+    the solver keeps it), the contact normal, the points on both surfaces and how many there are equal
+    Chipmunk's own collision of the two shapes."""
+    p = LaryngoscopeParams.from_config(haptic_config(None))
+    space = pymunk.Space()
+    blade = pymunk.Body(p.mass, p.moment)
+    poly, segment = pymunk.Poly(blade, p.outline), pymunk.Segment(space.static_body, *p.incisor_segment, INCISOR_RADIUS)
+    space.add(blade, poly, segment)
+    rng = np.random.default_rng(0)
+    n = 4000
+    x = p.body_start[0] + rng.uniform(-0.02, 0.02, n)
+    y = p.body_start[1] + rng.uniform(-0.002, 0.012, n)
+    a = rng.uniform(-0.4, 0.4, n)
+    normal, on_segment, on_blade = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+    count, deep = np.zeros(n, dtype=int), np.zeros(n, dtype=bool)
+    for k in range(n):
+        blade.position, blade.angle = (float(x[k]), float(y[k])), float(a[k])
+        space.reindex_shapes_for_body(blade)
+        found = lib.cpShapesCollide(segment._shape, poly._shape)
+        count[k] = found.count
+        for i in range(found.count):
+            point = found.points[i]
+            normal[k] = found.normal.x, found.normal.y
+            on_segment[k], on_blade[k] = (point.pointA.x, point.pointA.y), (point.pointB.x, point.pointB.y)
+            deep[k] |= point.distance <= -INCISOR_RADIUS
+    local, local_normals = polygon_planes(p.outline)
+    keep = ~deep
+    c, s = np.cos(a[keep]), np.sin(a[keep])
+    mine = collide(p.incisor_segment, INCISOR_RADIUS, transformed(local, x[keep], y[keep], c, s),
+                   transformed(local_normals, x[keep], y[keep], c, s, offset=False))
+    exists = mine[3]
+    assert np.array_equal(exists.sum(axis=1), count[keep])
+    touching = count[keep] > 0
+    assert touching.sum() > 500 and (~touching).sum() > 500            # both sides of contact were tried
+    slot = np.argmax(exists, axis=1)[touching]                           # pymunk lists its one contact first
+    rows = np.flatnonzero(touching)
+    assert np.array_equal(mine[0][touching], normal[keep][touching])
+    assert np.array_equal(mine[1][rows, slot], on_segment[keep][touching])
+    assert np.array_equal(mine[2][rows, slot], on_blade[keep][touching])
