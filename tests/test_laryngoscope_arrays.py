@@ -6,29 +6,39 @@ contacts as Chipmunk's own collision (cpShapesCollide), bit for bit."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pymunk
 import pytest
 from pymunk._chipmunk import lib
 
 from softenv._ops import ArrayOps, ScalarOps
-from softenv.devices.laryngoscope.incisors import collide, polygon_planes, transformed
-from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
-from softenv.devices.laryngoscope.rigid import Coupling, coupling_step
-from softenv.devices.laryngoscope.space import SOLVER_ITERATIONS, virtual_coupling
+from softenv.devices.laryngoscope.incisors import Arbiters, Solver, collide, polygon_planes, transformed
+from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION, LaryngoscopeParams
+from softenv.devices.laryngoscope.rigid import Coupling, Incisors, coupling_step
+from softenv.devices.laryngoscope.space import COLLISION_SLOP, SOLVER_ITERATIONS, virtual_coupling
 from softenv.training.hand import haptic_config
 
 H = 1e-3                                        # the device's substep at the default scene
 
 
-def pymunk_device(p: LaryngoscopeParams, threaded: bool) -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
+def pymunk_device(p: LaryngoscopeParams, threaded: bool, teeth: bool = False) -> tuple[pymunk.Space, pymunk.Body, pymunk.Body]:
+    """The hand, the blade and the coupling in a space of their own; with ``teeth`` the incisors too, as
+    the device space sets them (slop, friction)."""
     space = pymunk.Space(threaded=threaded)        # threaded: Chipmunk's hasty space, as the batch steps it
     if threaded:
         space.threads = 1
-    space.iterations = SOLVER_ITERATIONS
+    space.iterations, space.collision_slop = SOLVER_ITERATIONS, COLLISION_SLOP
     hand, blade = pymunk.Body(body_type=pymunk.Body.KINEMATIC), pymunk.Body(p.mass, p.moment)
     hand.position, blade.position = p.grip_start, p.body_start
-    space.add(hand, blade, pymunk.Poly(blade, p.outline), *virtual_coupling(hand, blade, p.grip, p))
+    shape = pymunk.Poly(blade, p.outline)
+    shape.friction = SHAPE_FRICTION
+    space.add(hand, blade, shape, *virtual_coupling(hand, blade, p.grip, p))
+    if teeth:
+        incisor = pymunk.Segment(space.static_body, *p.incisor_segment, INCISOR_RADIUS)
+        incisor.friction = SHAPE_FRICTION
+        space.add(incisor)
     return space, hand, blade
 
 
@@ -106,3 +116,34 @@ def test_the_blade_meets_the_incisors_where_chipmunk_finds_it_bit_for_bit():
     assert np.array_equal(mine[0][touching], normal[keep][touching])
     assert np.array_equal(mine[1][rows, slot], on_segment[keep][touching])
     assert np.array_equal(mine[2][rows, slot], on_blade[keep][touching])
+
+
+def test_the_blade_levered_on_the_incisors_steps_as_pymunk_steps_it_bit_for_bit():
+    """8 hands lift the blade's flange onto the incisors (12 mm up, tip up 0.2 rad over 1 s), ease back
+    and jitter (random hand velocities and tongue-like forces) for 2,000 substeps: the contact solver
+    (the arbiters' cached impulses, their persistence and the contacts' features, the bias velocity of
+    position correction, friction) leaves every blade as pymunk does, bit for bit, while the incisors
+    carry up to tens of newtons and the blades leave and touch them again."""
+    p = LaryngoscopeParams.from_config(haptic_config(None))
+    c, n = Coupling.of(p), 8
+    devices = [pymunk_device(p, threaded=False, teeth=True) for _ in range(n)]
+    local, local_normals = polygon_planes(p.outline)
+    solver = Solver(p.incisor_segment, INCISOR_RADIUS, local, local_normals, c.m_inv, c.i_inv,
+                    SHAPE_FRICTION * SHAPE_FRICTION, H, COLLISION_SLOP, 1.0 - math.pow(devices[0][0].collision_bias, H))
+    teeth = Incisors(solver, Arbiters.none(n), [np.zeros(n), np.zeros(n), np.zeros(n)], dt_coef=0.0)
+    blade = tuple(np.full(n, v) for v in (*p.body_start, 0.0, 0.0, 0.0, 0.0))
+    hand = tuple(np.full(n, v) for v in (*p.grip_start, 0.0))
+    rng = np.random.default_rng(0)
+    firsts, peak = 0, 0.0
+    for k in range(2000):
+        lift = np.array([0.0, 0.012, -0.2]) * (1.0 if k < 1000 else -1.0 if k < 1500 else 0.0)
+        hand_v, force = lift + rng.normal(0, [0.02, 0.02, 0.2], (n, 3)), rng.normal(0, [2.0, 2.0, 0.05], (n, 3))
+        reference = np.array([pymunk_step(d, hand_v[i], force[i]) for i, d in enumerate(devices)])
+        blade, hand = coupling_step(blade, hand, tuple(hand_v.T), tuple(force.T), H, c, SOLVER_ITERATIONS, ArrayOps, teeth)
+        teeth.dt_coef = 1.0                          # Chipmunk's h / previous h, after a space's first step
+        assert np.array_equal(np.stack(blade, axis=1), reference), k
+        assert teeth.arbiters.first is not None
+        firsts += int(teeth.arbiters.first.sum())
+        peak = max(peak, float(teeth.arbiters.jn.max()) / H)
+    assert peak > 10.0                               # newtons on the incisors
+    assert firsts > 2 * n                            # contacts made, lost and made again

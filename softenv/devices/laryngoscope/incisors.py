@@ -1,4 +1,4 @@
-"""The blade against the upper incisors as Chipmunk collides them, on numpy arrays (``n`` devices).
+"""The blade against the upper incisors as Chipmunk collides and solves them, on numpy arrays (``n`` devices).
 
 The second piece of the laryngoscope on arrays (issue 37, after :mod:`.rigid`): Chipmunk's
 ``SegmentToPoly`` for the incisors (a static rounded segment) and the blade (a convex polygon without
@@ -10,10 +10,18 @@ nearest taken. Its closest points, normal and distance, then the contact points 
 support edges, follow Chipmunk's expressions (``ClosestPointsNew``, ``SupportEdgeFor*``,
 ``ContactPoints``), so the same IEEE operations run in the same order
 (``tests/test_laryngoscope_arrays.py`` holds them to Chipmunk's ``cpShapesCollide``, bit for bit).
+
+The contact's solver follows ``cpArbiter``: each device's arbiter (:class:`Arbiters`) keeps its
+contacts' accumulated impulses from step to step, matched by the features they join, and outlives its
+last contact by :data:`PERSISTENCE` steps; :func:`prestep`, :func:`apply_cached` and
+:func:`apply_impulse` are ``cpArbiterPreStep``, ``ApplyCachedImpulse`` and ``ApplyImpulse`` with
+Chipmunk's sequential impulses, friction cone and position-correcting bias velocity.
+:func:`~.rigid.coupling_step` runs them in Chipmunk's order.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -65,11 +73,13 @@ def _closest_t(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def collide(segment: tuple[tuple[float, float], tuple[float, float]], radius: float, vertices: np.ndarray,
-            normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+            normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The contacts of a static segment ``(a, b)`` of ``radius`` with ``n`` polygons (world ``vertices``
     and plane ``normals``, ``(n, V, 2)``). Returns the normal ``(n, 2)`` (from the segment toward the
-    blade), the contact points on the segment's surface and on the blade ``(n, 2, 2)`` each, and which
-    of the (at most two) contacts exist ``(n, 2)``."""
+    blade), the contact points on the segment's surface and on the blade ``(n, 2, 2)`` each, which
+    of the (at most two) contacts exist ``(n, 2)``, and the features each joins ``(n, 2, 2)``: the
+    segment's end and the blade's vertex (Chipmunk's contact hash, by which a contact keeps its
+    impulses from one step to the next)."""
     n_dev, count = vertices.shape[:2]
     ends = np.array(segment, dtype=np.float64)                       # (2, 2): ta, tb
     # the Minkowski points blade vertex j - segment end i: (n, 2, V, 2)
@@ -119,6 +129,9 @@ def collide(segment: tuple[tuple[float, float], tuple[float, float]], radius: fl
     d1a, d1b, d2a, d2b = _cross(s_a, normal), _cross(s_b, normal), _cross(q_a, normal), _cross(q_b, normal)
     e1_denom = 1.0 / (d1b - d1a + TINY)
     e2_denom = 1.0 / (d2b - d2a + TINY)
+    seg_a, seg_b = np.where(forward, 0, 1), np.where(forward, 1, 0)
+    blade_a, blade_b = np.where(keep, i0p, i1p), np.where(keep, i1p, i2p)
+    features = np.stack([np.stack([seg_a, blade_b], axis=1), np.stack([seg_b, blade_a], axis=1)], axis=1)
     points_a, points_b, exists = [], [], []
     for first, second in ((d2b - d1a, d1a - d2a), (d2a - d1a, d1b - d2a)):
         u = np.clip(first * e1_denom, 0.0, 1.0)[:, None]
@@ -128,7 +141,7 @@ def collide(segment: tuple[tuple[float, float], tuple[float, float]], radius: fl
         points_a.append(p1)
         points_b.append(p2)
         exists.append(touching & (_dot(p2 - p1, normal) <= 0.0))
-    return normal, np.stack(points_a, axis=1), np.stack(points_b, axis=1), np.stack(exists, axis=1)
+    return normal, np.stack(points_a, axis=1), np.stack(points_b, axis=1), np.stack(exists, axis=1), features
 
 
 def _segment_normal(ends: np.ndarray) -> np.ndarray:
@@ -136,3 +149,168 @@ def _segment_normal(ends: np.ndarray) -> np.ndarray:
     delta = ends[1] - ends[0]
     unit = delta * (1.0 / (np.sqrt(_dot(delta, delta)) + TINY))
     return np.array([unit[1], -unit[0]])
+
+
+PERSISTENCE = 3                          # pymunk's collision_persistence: steps an arbiter outlives its contact
+
+
+@dataclass
+class Arbiters:
+    """Each device's arbiter with the incisors, as Chipmunk keeps it between steps: whether it exists
+    (``alive``), the steps since it last had contacts (``ticks``), and its contacts (at most two
+    slots: ``exists``, the features they join, ``features`` (segment end, blade vertex), and their
+    accumulated normal and tangent impulses ``jn``, ``jt``). Within a step: whether this is its first
+    collision (no cached impulse), the normal and each contact's offsets, masses, bias and bias impulse."""
+
+    alive: np.ndarray
+    ticks: np.ndarray
+    exists: np.ndarray
+    features: np.ndarray
+    jn: np.ndarray
+    jt: np.ndarray
+    first: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    r1: np.ndarray | None = None
+    r2: np.ndarray | None = None
+    n_mass: np.ndarray | None = None
+    t_mass: np.ndarray | None = None
+    bias: np.ndarray | None = None
+    j_bias: np.ndarray | None = None
+
+    @classmethod
+    def none(cls, n: int) -> Arbiters:
+        return cls(np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64), np.zeros((n, 2), dtype=bool),
+                   np.full((n, 2, 2), -1, dtype=np.int64), np.zeros((n, 2)), np.zeros((n, 2)))
+
+
+@dataclass(frozen=True)
+class Solver:
+    """The contact's constants: the segment and its radius, the blade's polygon, inverse mass and
+    moment, the friction (the product of the shapes'), the step, the space's slop and bias."""
+
+    segment: tuple[tuple[float, float], tuple[float, float]]
+    radius: float
+    local: np.ndarray
+    local_normals: np.ndarray
+    m_inv: float
+    i_inv: float
+    friction: float
+    h: float
+    slop: float
+    bias_coef: float
+
+
+def _max0(x: np.ndarray) -> np.ndarray:
+    return np.where(x > 0.0, x, 0.0)                  # cpfmax(x, 0): 0.0, never -0.0
+
+
+def _rotate(n: np.ndarray, jn: np.ndarray, jt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return n[:, 0] * jn - n[:, 1] * jt, n[:, 0] * jt + n[:, 1] * jn
+
+
+def prestep(arb: Arbiters, s: Solver, px: np.ndarray, py: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray,
+            vx: np.ndarray, vy: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Collide, update each device's arbiter (cpArbiterUpdate, the cache's filter) and pre-step its
+    contacts (cpArbiterPreStep) at the blade's new pose and its velocity before the step's forces.
+    Returns which devices touch the incisors this step."""
+    vertices = transformed(s.local, px, py, cos_a, sin_a)
+    normals = transformed(s.local_normals, px, py, cos_a, sin_a, offset=False)
+    normal, on_segment, on_blade, exists, features = collide(s.segment, s.radius, vertices, normals)
+    touching = np.asarray(exists.any(axis=1), dtype=bool)
+    jn, jt = np.zeros((len(px), 2)), np.zeros((len(px), 2))
+    for new in range(2):
+        for old in range(2):
+            same = arb.alive & arb.exists[:, old] & np.all(features[:, new] == arb.features[:, old], axis=1)
+            jn[:, new] = np.where(same, arb.jn[:, old], jn[:, new])
+            jt[:, new] = np.where(same, arb.jt[:, old], jt[:, new])
+    arb.first = touching & ~(arb.alive & (arb.ticks == 0))
+    ticks = np.where(touching, 0, arb.ticks + 1)
+    arb.alive = touching | (arb.alive & (ticks < PERSISTENCE))
+    arb.ticks = ticks
+    kept = touching[:, None]
+    arb.exists = np.where(kept, exists, arb.exists)
+    arb.features = np.where(kept[..., None], features, arb.features)
+    arb.jn, arb.jt = np.where(kept, jn, arb.jn), np.where(kept, jt, arb.jt)
+    arb.normal = np.where(kept, normal, arb.normal if arb.normal is not None else normal)
+    n = arb.normal
+    r1 = on_segment - 0.0                                # the static body sits at the origin
+    r2 = on_blade - np.stack([px, py], axis=1)[:, None, :]
+    arb.r1, arb.r2 = r1, r2
+    rcn = r2[..., 0] * n[:, None, 1] - r2[..., 1] * n[:, None, 0]
+    arb.n_mass = 1.0 / (0.0 + (s.m_inv + s.i_inv * rcn * rcn))
+    rct = r2[..., 0] * n[:, None, 0] - r2[..., 1] * -n[:, None, 1]
+    arb.t_mass = 1.0 / (0.0 + (s.m_inv + s.i_inv * rct * rct))
+    dx, dy = (r2[..., 0] - r1[..., 0]) + px[:, None], (r2[..., 1] - r1[..., 1]) + py[:, None]
+    dist = dx * n[:, None, 0] + dy * n[:, None, 1]
+    low = dist + s.slop
+    arb.bias = -s.bias_coef * np.where(0.0 < low, 0.0, low) / s.h
+    arb.j_bias = np.zeros_like(arb.bias)
+    return touching
+
+
+def apply_cached(arb: Arbiters, touching: np.ndarray, s: Solver, dt_coef: float, vx: np.ndarray, vy: np.ndarray,
+                 w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """cpArbiterApplyCachedImpulse: the contacts' impulses of the last step again (not on a first collision)."""
+    assert arb.normal is not None and arb.r2 is not None and arb.first is not None
+    for slot in range(2):
+        on = touching & ~arb.first & arb.exists[:, slot]
+        jx, jy = _rotate(arb.normal, arb.jn[:, slot], arb.jt[:, slot])
+        jx, jy = jx * dt_coef, jy * dt_coef
+        r2x, r2y = arb.r2[:, slot, 0], arb.r2[:, slot, 1]
+        vx = np.where(on, vx + jx * s.m_inv, vx)
+        vy = np.where(on, vy + jy * s.m_inv, vy)
+        w = np.where(on, w + s.i_inv * (r2x * jy - r2y * jx), w)
+    return vx, vy, w
+
+
+def apply_impulse(arb: Arbiters, touching: np.ndarray, s: Solver, bounce: np.ndarray, vx: np.ndarray,
+                  vy: np.ndarray, w: np.ndarray, bias: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One pass of cpArbiterApplyImpulse over each device's contacts; ``bias`` (vx, vy, spin of the
+    position correction) is updated in place."""
+    assert arb.normal is not None and arb.r2 is not None and arb.n_mass is not None and arb.t_mass is not None
+    assert arb.bias is not None and arb.j_bias is not None
+    n = arb.normal
+    nx, ny = n[:, 0], n[:, 1]
+    for slot in range(2):
+        on = touching & arb.exists[:, slot]
+        r2x, r2y = arb.r2[:, slot, 0], arb.r2[:, slot, 1]
+        n_mass, t_mass = arb.n_mass[:, slot], arb.t_mass[:, slot]
+        bvx, bvy, bw = bias
+        vb_x, vb_y = bvx + -r2y * bw, bvy + r2x * bw
+        vr_x, vr_y = vx + -r2y * w, vy + r2x * w
+        vbn = vb_x * nx + vb_y * ny
+        vrn = vr_x * nx + vr_y * ny
+        vrt = vr_x * -ny + vr_y * nx
+        jbn = (arb.bias[:, slot] - vbn) * n_mass
+        jbn_old = arb.j_bias[:, slot]
+        j_bias = _max0(jbn_old + jbn)
+        jn = -(bounce[:, slot] + vrn) * n_mass
+        jn_old = arb.jn[:, slot]
+        jn_acc = _max0(jn_old + jn)
+        jt_max = s.friction * jn_acc
+        jt = -vrt * t_mass
+        jt_old = arb.jt[:, slot]
+        x = jt_old + jt
+        x = np.where(x > -jt_max, x, -jt_max)
+        jt_acc = np.where(x < jt_max, x, jt_max)
+        bx, by = nx * (j_bias - jbn_old), ny * (j_bias - jbn_old)
+        jx, jy = _rotate(n, jn_acc - jn_old, jt_acc - jt_old)
+        bias[0] = np.where(on, bvx + bx * s.m_inv, bvx)
+        bias[1] = np.where(on, bvy + by * s.m_inv, bvy)
+        bias[2] = np.where(on, bw + s.i_inv * (r2x * by - r2y * bx), bw)
+        vx = np.where(on, vx + jx * s.m_inv, vx)
+        vy = np.where(on, vy + jy * s.m_inv, vy)
+        w = np.where(on, w + s.i_inv * (r2x * jy - r2y * jx), w)
+        arb.j_bias[:, slot] = np.where(on, j_bias, jbn_old)
+        arb.jn[:, slot] = np.where(on, jn_acc, jn_old)
+        arb.jt[:, slot] = np.where(on, jt_acc, jt_old)
+    return vx, vy, w
+
+
+def bounce_velocity(arb: Arbiters, vx: np.ndarray, vy: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Each contact's normal velocity times the restitution (0 x 0): Chipmunk's ``bounce``, kept for its
+    sign of zero."""
+    assert arb.normal is not None and arb.r2 is not None
+    r2x, r2y = arb.r2[..., 0], arb.r2[..., 1]
+    vrx, vry = vx[:, None] + -r2y * w[:, None], vy[:, None] + r2x * w[:, None]
+    return (vrx * arb.normal[:, None, 0] + vry * arb.normal[:, None, 1]) * (0.0 * 0.0)

@@ -11,11 +11,13 @@ computed outside the space as today), in Chipmunk's order of operations:
 4. ``iterations`` passes of each spring's implicit damping impulse (``applyImpulse``), the springs in
    the order they were added.
 
-Chipmunk's expressions are kept as written (``n = delta * (1 / dist)``, the accumulated impulse
-clamped and differenced), so the same IEEE operations run in the same order. The incisors' contact
-(Chipmunk's collision, :mod:`.incisors`, and its impulse solver, not written yet) is not here:
-:func:`coupling_step` equals pymunk while the blade is clear of the teeth
-(``tests/test_laryngoscope_arrays.py``).
+With :class:`Incisors` (numpy arrays), the blade's contact with the incisors joins in where Chipmunk
+runs it (:mod:`.incisors`): the collision and the arbiters' pre-step after the positions, their cached
+impulses after the velocities, their impulses before the springs' in each pass, and the bias velocity
+of position correction spent at the next step's positions. Chipmunk's expressions are kept as written
+(``n = delta * (1 / dist)``, the accumulated impulse clamped and differenced), so the same IEEE
+operations run in the same order: :func:`coupling_step` equals pymunk bit for bit, clear of the teeth
+and levered on them (``tests/test_laryngoscope_arrays.py``).
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ..._ops import PhysicsOps
+from . import incisors
 from .params import SPRING_LENGTH, LaryngoscopeParams
 
 
@@ -50,20 +55,42 @@ class Coupling:
 HAND_ANCHORS = ((-SPRING_LENGTH, 0.0), (0.0, SPRING_LENGTH))
 
 
+@dataclass
+class Incisors:
+    """The incisors' contact for a batch (numpy only): the solver's constants, each device's arbiter, the
+    blade's position-correction velocity (x, y, spin: Chipmunk's bias velocity, spent at the next step's
+    position update) and the ratio of this step to the last (Chipmunk's ``dt_coef``: 0 at a space's
+    first step, 1 after)."""
+
+    solver: incisors.Solver
+    arbiters: incisors.Arbiters
+    bias: list[np.ndarray]
+    dt_coef: float = 1.0
+
+
 def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[Any, Any, Any],
                   force: tuple[Any, Any, Any], h: float, c: Coupling, iterations: int,
-                  ops: PhysicsOps) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+                  ops: PhysicsOps, teeth: Incisors | None = None) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
     """One Chipmunk step of ``h`` seconds: ``blade`` (x, y, angle, vx, vy, spin), ``hand`` (x, y, pitch)
-    moving at ``hand_v`` (vx, vy, spin), ``force`` (fx, fy, torque) on the blade's centre of mass.
+    moving at ``hand_v`` (vx, vy, spin), ``force`` (fx, fy, torque) on the blade's centre of mass, and
+    with ``teeth`` (arrays only) the blade's contact with the incisors, whose state it updates.
     Returns the blade's and the hand's new state, as pymunk's ``space.step(h)`` leaves them."""
     px, py, a, vx, vy, w = blade
     gx, gy, pitch = hand
     hvx, hvy, hw = hand_v
     fx, fy, torque = force
-    # 1. positions (cpBodyUpdatePosition; no bias velocities without contacts)
+    # 1. positions (cpBodyUpdatePosition), with the bias velocities the contact left, which it spends
     gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
-    px, py, a = px + vx * h, py + vy * h, a + w * h
+    if teeth is None:
+        px, py, a = px + vx * h, py + vy * h, a + w * h
+    else:
+        bvx, bvy, bw = teeth.bias
+        px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
+        teeth.bias = [np.zeros_like(bvx), np.zeros_like(bvy), np.zeros_like(bw)]
     ca, sa, cp, sp = ops.cos(a), ops.sin(a), ops.cos(pitch), ops.sin(pitch)
+    if teeth is not None:                       # collide, then the arbiters' pre-step before the springs'
+        touching = incisors.prestep(teeth.arbiters, teeth.solver, px, py, ca, sa, vx, vy, w)
+        bounce = incisors.bounce_velocity(teeth.arbiters, vx, vy, w)
     qx, qy = c.grip
     r2x, r2y = ca * qx + -sa * qy, sa * qx + ca * qy
     # 2. the springs' explicit impulses (preStep); the hand is kinematic: impulses leave it as it is
@@ -90,8 +117,12 @@ def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[A
     # 3. velocities (cpBodyUpdateVelocity: the space's damping is 1, gravity 0)
     vx, vy = vx * 1.0 + (0.0 + fx * c.m_inv) * h, vy * 1.0 + (0.0 + fy * c.m_inv) * h
     w = w * 1.0 + torque * c.i_inv * h
-    # 4. the implicit damping impulses (applyImpulse), springs in the order they were added
+    if teeth is not None:
+        vx, vy, w = incisors.apply_cached(teeth.arbiters, touching, teeth.solver, teeth.dt_coef, vx, vy, w)
+    # 4. the implicit damping impulses (applyImpulse): the contact's, then the springs' in the order added
     for _ in range(iterations):
+        if teeth is not None:
+            vx, vy, w = incisors.apply_impulse(teeth.arbiters, touching, teeth.solver, bounce, vx, vy, w, teeth.bias)
         for s in springs:
             r1x, r1y, nx, ny, n_mass, v_coef, target, acc = s
             rel_x = (vx + -r2y * w) - (hvx + -r1y * hw)
