@@ -14,10 +14,16 @@ import pytest
 from pymunk._chipmunk import lib
 
 from softenv._ops import ArrayOps, ScalarOps
+from softenv.devices.laryngoscope.batch import LaryngoscopeArrays
 from softenv.devices.laryngoscope.incisors import Arbiters, Solver, collide, polygon_planes, transformed
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION, LaryngoscopeParams
+from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.devices.laryngoscope.rigid import Coupling, Incisors, coupling_step
+from softenv.devices.laryngoscope.single import Laryngoscope
 from softenv.devices.laryngoscope.space import COLLISION_SLOP, SOLVER_ITERATIONS, virtual_coupling
+from softenv.envs import HAPTIC_SCENES
+from softenv.envs.config import scene_config
+from softenv.envs.world import World
 from softenv.training.hand import haptic_config
 
 H = 1e-3                                        # the device's substep at the default scene
@@ -147,3 +153,37 @@ def test_the_blade_levered_on_the_incisors_steps_as_pymunk_steps_it_bit_for_bit(
         peak = max(peak, float(teeth.arbiters.jn.max()) / H)
     assert peak > 10.0                               # newtons on the incisors
     assert firsts > 2 * n                            # contacts made, lost and made again
+
+
+@pytest.mark.parametrize("sections, periods, on_incisors", [
+    ({}, 400, 10),
+    ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 40, 0),
+], ids=["default", "stiff"])
+def test_every_device_of_the_array_batch_equals_a_single_pymunk_device_bit_for_bit(sections, periods, on_incisors):
+    """LaryngoscopeArrays (no pymunk space) against single pymunk devices, each of 4 with its own
+    actions: pressing, sweeping, levering on the incisors and into the walls, idle; the same state after
+    every control period (blade, hand, lateral, tongue and incisor contact, hand velocity) and the same
+    observation. The stiff corner: 1e6 N/m coupling, 10 g blade, 10 MPa tongue."""
+    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], sections))
+    parts = laryngoscope_parts(world.scene, world.config)
+    n = 4
+    singles, batch = [Laryngoscope(*parts) for _ in range(n)], LaryngoscopeArrays(*parts, n)
+    rng = np.random.default_rng(4)
+    actions = rng.uniform(-1, 1, (periods, n, 4))
+    part = periods // 8
+    actions[:3 * part, :, 1] = np.abs(actions[:3 * part, :, 1])      # press into the tongue first
+    actions[3 * part:4 * part, :2] = [1.0, 0.0, 0.0, 1.0]             # two insert and lever: the incisors, the walls
+    actions[6 * part:6 * part + part // 2] = 0.0
+    incisors = 0
+    for a in actions:
+        for single, row in zip(singles, a):
+            single.control_step(row.tolist())
+        batch.control_step(a)
+        t = batch.state()
+        for i, single in enumerate(singles):
+            s = single.state()
+            for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
+                assert np.array_equal(getattr(s, field)[0], getattr(t, field)[i]), (field, i)
+            assert single.observation() == batch.observation()[i].tolist()
+        incisors += int(np.count_nonzero(batch.incisor_force > 0))
+    assert incisors >= on_incisors

@@ -1,6 +1,12 @@
-"""``n`` simulated laryngoscopes stepped together: one pymunk space, numpy and ``pymunk.batch``. The
-physics is :mod:`.physics`, run with ``ArrayOps``: device 0 equals a single
-:class:`~.single.Laryngoscope` bit for bit, the others to rounding (:mod:`.space`)."""
+"""``n`` simulated laryngoscopes stepped together on numpy arrays. The physics is :mod:`.physics`, run
+with ``ArrayOps``, on one of two engines for the blade, its coupling and the incisors:
+
+* :class:`LaryngoscopeBatch`: one pymunk space, stepped through ``pymunk.batch``. Device 0 equals a
+  single :class:`~.single.Laryngoscope` bit for bit, the others to rounding (:mod:`.space`).
+* :class:`LaryngoscopeArrays`: Chipmunk's step written out on arrays (:mod:`.rigid`, :mod:`.incisors`),
+  no pymunk space: every device equals a single one bit for bit.
+
+:class:`ArrayLaryngoscopes` holds what both share: the substep loop, the state and its readings."""
 
 from __future__ import annotations
 
@@ -8,15 +14,23 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+import math
+
 from ..._ops import ArrayOps
 from ..contact import TongueContact
-from .params import LaryngoscopeParams
+from . import incisors
+from .params import INCISOR_RADIUS, SHAPE_FRICTION, LaryngoscopeParams
 from .physics import contact_features, hand_command, squash, tongue_substep
-from .space import DeviceState, LaryngoscopeBase
+from .rigid import Coupling, Incisors, coupling_step
+from .space import COLLISION_SLOP, SOLVER_ITERATIONS, DeviceSpace, DeviceState, LaryngoscopeBase
 
 
-class LaryngoscopeBatch(LaryngoscopeBase):
-    """``n`` simulated laryngoscopes in one pymunk space, stepped with numpy and ``pymunk.batch``."""
+Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]       # x, y and angular components, one entry a device
+
+
+class ArrayLaryngoscopes(LaryngoscopeBase):
+    """What the two batch engines share: ``n`` devices' state as arrays, the substep loop, the readings.
+    An engine supplies :meth:`_bodies`, :meth:`_advance`, :meth:`_flush` and :meth:`_place`."""
 
     ops = ArrayOps
     _own = staticmethod(np.copy)
@@ -25,39 +39,31 @@ class LaryngoscopeBatch(LaryngoscopeBase):
     def _rows(*columns: np.ndarray) -> np.ndarray:
         return np.stack(columns, axis=-1)
 
-    _READ = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE | pymunk.batch.BodyFields.VELOCITY \
-        | pymunk.batch.BodyFields.ANGULAR_VELOCITY
-    _WRITE = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY \
-        | pymunk.batch.BodyFields.FORCE | pymunk.batch.BodyFields.TORQUE
-    _ARBITERS = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID \
-        | pymunk.batch.ArbiterFields.TOTAL_IMPULSE
-
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         super().__init__(params, contact, n)
-        self._read = pymunk.batch.Buffer()
-        self._arbiters = pymunk.batch.Buffer()
-        self._out = np.zeros((2 * n + 1, 6))             # hands and blades interleaved, then the static body
-        self._write = pymunk.batch.Buffer()
-        self._write.set_float_buf(self._out)
-        ids = np.array([b.id for b in self._space.blades], dtype=np.uint64)
-        self._id_order = np.argsort(ids)
-        self._sorted_ids = ids[self._id_order]
-        self._static_id = np.uint64(self.space.static_body.id)
-        self._origin = np.zeros((n, 2, 6))
-        self._origin[:, :, :2] = self._space.offsets[:, None, :]
         self._lateral = np.zeros((n, 4))
         self._contact = np.zeros((n, 4))
         self._incisor = np.zeros(n)
         self._touched = np.zeros(n, dtype=bool)
         self._hand_v = np.zeros((n, 4))
-        self.load_state(self.start_state(n))
 
     def _bodies(self) -> np.ndarray:
         """``(n, 2, 6)`` local x, y, angle, vx, vy, spin of every hand (0) and blade (1)."""
-        self._read.clear()
-        pymunk.batch.get_space_bodies(self.space, self._READ, self._read)
-        rows = np.frombuffer(self._read.float_buf(), dtype=np.float64)[:12 * self.n].reshape(self.n, 2, 6)
-        return rows - self._origin                        # local frame (a new array: the buffer is reused)
+        raise NotImplementedError
+
+    def _advance(self, hand_v: Vec3, blade_v: Vec3, force: Vec3, impulse: np.ndarray) -> None:
+        """One substep of the blades and hands: the hands at ``hand_v``, the blades with their velocities
+        ``blade_v`` under ``force`` (x, y, torque); adds each device's incisor impulse to ``impulse``."""
+        raise NotImplementedError
+
+    def _flush(self, rows: np.ndarray) -> None:
+        """Drop the contact state of the devices ``rows`` (indices) that their poses do not show."""
+        raise NotImplementedError
+
+    def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
+        """Put the devices ``rows`` (indices) at ``blade`` (x, y, angle, vx, vy, spin) and ``hand`` (x, y,
+        pitch) rows, the hands at rest, their contact state dropped."""
+        raise NotImplementedError
 
     def control_step(self, actions: np.ndarray, moving: np.ndarray | None = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
@@ -69,9 +75,9 @@ class LaryngoscopeBatch(LaryngoscopeBase):
         self.substeps(vX, vY, spin, v_lat, self.n_substeps)
 
     def substeps(self, vX: np.ndarray, vY: np.ndarray, spin: np.ndarray, v_lat: np.ndarray, count: int) -> None:
-        self._space.flush(*np.flatnonzero(self._touched).tolist())
+        self._flush(np.flatnonzero(self._touched))
         self._touched[:] = False
-        c, h, out = self.c, self.h, self._out
+        c, h = self.c, self.h
         lo, hi = c.low, c.high
         lat_y, lat_v, hand_lat, anchor = (col.copy() for col in self._lateral.T)
         impulse = np.zeros(self.n)
@@ -89,32 +95,12 @@ class LaryngoscopeBatch(LaryngoscopeBase):
             fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
                 (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
                 loads, slopes, c, ArrayOps)
-            hands, blades = out[0:2 * self.n:2], out[1:2 * self.n:2]
-            hands[:, 0], hands[:, 1], hands[:, 2] = hvx, hvy, hw
-            blades[:, 0], blades[:, 1], blades[:, 2] = vx, vy, w
-            blades[:, 3], blades[:, 4], blades[:, 5] = fx, fy, torque
-            pymunk.batch.set_space_bodies(self.space, self._WRITE, self._write)
-            self.space.step(h)
-            self._add_incisor_impulses(impulse)
+            self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
         self._lateral = np.stack([lat_y, lat_v, hand_lat, anchor], axis=1)
         self._hand_v = np.stack([hvx, hvy, hw, hl], axis=1)
         self._contact = np.stack([P, Q, cx, cy], axis=1)
         self._incisor = impulse / (count * h)
         self._forget()
-
-    def _add_incisor_impulses(self, impulse: np.ndarray) -> None:
-        """Add ``|total_impulse|`` of this substep's contact with the incisors to each device's sum (one
-        shape a side, so at most one contact a device: one addition each, as the single device's
-        callback makes it)."""
-        self._arbiters.clear()
-        pymunk.batch.get_space_arbiters(self.space, self._ARBITERS, self._arbiters)
-        ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uint64).reshape(-1, 2)
-        if len(ids):
-            j = np.frombuffer(self._arbiters.float_buf(), dtype=np.float64).reshape(-1, 2)
-            blade = np.where(ids[:, 0] == self._static_id, ids[:, 1], ids[:, 0])   # the other body is static
-            envs = self._id_order[np.searchsorted(self._sorted_ids, blade)]
-            impulse[envs] += np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1])
-            self._touched[envs] = True
 
     def features(self) -> tuple[np.ndarray, np.ndarray]:
         """Force features ``(n, 4)`` of the contacts and a mask of the devices in contact."""
@@ -149,12 +135,132 @@ class LaryngoscopeBatch(LaryngoscopeBase):
         """Set the state of the devices in ``rows`` (all by default) from the matching rows of ``s``."""
         idx = np.arange(self.n) if rows is None else np.flatnonzero(rows)
         src = np.arange(len(idx)) if len(s.blade) == len(idx) else idx
-        for i, j in zip(idx.tolist(), src.tolist()):
-            self._space.place(i, tuple(s.blade[j, :3]), tuple(s.blade[j, 3:]), tuple(s.hand[j]))
+        self._place(idx, s.blade[src], s.hand[src])
         self._lateral[idx] = s.lateral[src]
         self._contact[idx] = s.contact[src, :4]
         self._incisor[idx] = s.contact[src, 4]
-        self._touched[idx] = False                         # place() flushed them
+        self._touched[idx] = False                         # _place() flushed them
         self._hand_v[idx] = s.hand_velocity[src]
         self._forget()
 
+
+
+class LaryngoscopeBatch(ArrayLaryngoscopes):
+    """``n`` simulated laryngoscopes in one pymunk space, stepped with numpy and ``pymunk.batch``."""
+
+    _READ = pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE | pymunk.batch.BodyFields.VELOCITY \
+        | pymunk.batch.BodyFields.ANGULAR_VELOCITY
+    _WRITE = pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY \
+        | pymunk.batch.BodyFields.FORCE | pymunk.batch.BodyFields.TORQUE
+    _ARBITERS = pymunk.batch.ArbiterFields.BODY_A_ID | pymunk.batch.ArbiterFields.BODY_B_ID \
+        | pymunk.batch.ArbiterFields.TOTAL_IMPULSE
+
+    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
+        super().__init__(params, contact, n)
+        self._space = DeviceSpace(params, n)
+        self._read = pymunk.batch.Buffer()
+        self._arbiters = pymunk.batch.Buffer()
+        self._out = np.zeros((2 * n + 1, 6))             # hands and blades interleaved, then the static body
+        self._write = pymunk.batch.Buffer()
+        self._write.set_float_buf(self._out)
+        ids = np.array([b.id for b in self._space.blades], dtype=np.uint64)
+        self._id_order = np.argsort(ids)
+        self._sorted_ids = ids[self._id_order]
+        self._static_id = np.uint64(self.space.static_body.id)
+        self._origin = np.zeros((n, 2, 6))
+        self._origin[:, :, :2] = self._space.offsets[:, None, :]
+        self.load_state(self.start_state(n))
+
+    def _bodies(self) -> np.ndarray:
+        """``(n, 2, 6)`` local x, y, angle, vx, vy, spin of every hand (0) and blade (1)."""
+        self._read.clear()
+        pymunk.batch.get_space_bodies(self.space, self._READ, self._read)
+        rows = np.frombuffer(self._read.float_buf(), dtype=np.float64)[:12 * self.n].reshape(self.n, 2, 6)
+        return rows - self._origin                        # local frame (a new array: the buffer is reused)
+
+    def _advance(self, hand_v: Vec3, blade_v: Vec3, force: Vec3, impulse: np.ndarray) -> None:
+        out = self._out
+        hands, blades = out[0:2 * self.n:2], out[1:2 * self.n:2]
+        hands[:, 0], hands[:, 1], hands[:, 2] = hand_v
+        blades[:, 0], blades[:, 1], blades[:, 2] = blade_v
+        blades[:, 3], blades[:, 4], blades[:, 5] = force
+        pymunk.batch.set_space_bodies(self.space, self._WRITE, self._write)
+        self.space.step(self.h)
+        self._add_incisor_impulses(impulse)
+
+    def _add_incisor_impulses(self, impulse: np.ndarray) -> None:
+        """Add ``|total_impulse|`` of this substep's contact with the incisors to each device's sum (one
+        shape a side, so at most one contact a device: one addition each, as the single device's
+        callback makes it)."""
+        self._arbiters.clear()
+        pymunk.batch.get_space_arbiters(self.space, self._ARBITERS, self._arbiters)
+        ids = np.frombuffer(self._arbiters.int_buf(), dtype=np.uint64).reshape(-1, 2)
+        if len(ids):
+            j = np.frombuffer(self._arbiters.float_buf(), dtype=np.float64).reshape(-1, 2)
+            blade = np.where(ids[:, 0] == self._static_id, ids[:, 1], ids[:, 0])   # the other body is static
+            envs = self._id_order[np.searchsorted(self._sorted_ids, blade)]
+            impulse[envs] += np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1])
+            self._touched[envs] = True
+
+    def _flush(self, rows: np.ndarray) -> None:
+        self._space.flush(*rows.tolist())
+
+    def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
+        for i, b, g in zip(rows.tolist(), blade.tolist(), hand.tolist()):
+            self._space.place(i, tuple(b[:3]), tuple(b[3:]), tuple(g))
+
+
+class LaryngoscopeArrays(ArrayLaryngoscopes):
+    """``n`` simulated laryngoscopes on numpy arrays alone: Chipmunk's step for the blades, their
+    couplings and the incisors written out (:func:`~.rigid.coupling_step`), every device in its own
+    local frame, so each equals a single pymunk :class:`~.single.Laryngoscope` bit for bit."""
+
+    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
+        super().__init__(params, contact, n)
+        local, local_normals = incisors.polygon_planes(params.outline)
+        h = self.h
+        bias = math.pow(float(np.float32(1.0) - np.float32(0.1)), 60.0)     # Chipmunk's default: (1 - 0.1f)^60
+        solver = incisors.Solver(params.incisor_segment, INCISOR_RADIUS, local, local_normals, 1.0 / params.mass,
+                                 1.0 / params.moment, SHAPE_FRICTION * SHAPE_FRICTION, h, COLLISION_SLOP,
+                                 1.0 - math.pow(bias, h))
+        self._coupling = Coupling.of(params)
+        self._teeth = Incisors(solver, incisors.Arbiters.none(n), [np.zeros(n), np.zeros(n), np.zeros(n)])
+        self._blade = np.zeros((n, 6))
+        self._hand = np.zeros((n, 3))
+        self.load_state(self.start_state(n))
+
+    def _bodies(self) -> np.ndarray:
+        hands = np.concatenate([self._hand, self._hand_v[:, :3]], axis=1)
+        return np.stack([hands, self._blade], axis=1)
+
+    def _advance(self, hand_v: Vec3, blade_v: Vec3, force: Vec3, impulse: np.ndarray) -> None:
+        blade = (*self._blade[:, :3].T, *blade_v)
+        moved, hand = coupling_step(blade, tuple(self._hand.T), hand_v, force, self.h, self._coupling,
+                                    SOLVER_ITERATIONS, ArrayOps, self._teeth)
+        self._blade = np.stack(moved, axis=1)
+        self._hand = np.stack(hand, axis=1)
+        self._hand_v[:, :3] = np.stack(hand_v, axis=1)
+        arbiters = self._teeth.arbiters
+        touching = arbiters.alive & (arbiters.ticks == 0)
+        assert arbiters.normal is not None
+        total = np.zeros((self.n, 2))
+        for slot in range(2):                       # cpArbiterTotalImpulse: the contacts' impulses summed
+            on = (touching & arbiters.exists[:, slot])[:, None]
+            jx, jy = arbiters.normal[:, 0] * arbiters.jn[:, slot] - arbiters.normal[:, 1] * arbiters.jt[:, slot], \
+                arbiters.normal[:, 0] * arbiters.jt[:, slot] + arbiters.normal[:, 1] * arbiters.jn[:, slot]
+            total = np.where(on, total + np.stack([jx, jy], axis=1), total)
+        impulse += np.where(touching, np.sqrt(total[:, 0] * total[:, 0] + total[:, 1] * total[:, 1]), 0.0)
+        self._touched |= touching
+
+    def _flush(self, rows: np.ndarray) -> None:
+        # as the pymunk space's flush: the arbiters dropped, the bias velocities spent over zero time
+        a = self._teeth.arbiters
+        a.alive[rows], a.ticks[rows], a.exists[rows], a.features[rows] = False, 0, False, -1
+        a.jn[rows], a.jt[rows] = 0.0, 0.0
+        for b in self._teeth.bias:
+            b[rows] = 0.0
+
+    def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
+        self._blade[rows] = blade
+        self._hand[rows] = hand
+        self._flush(rows)

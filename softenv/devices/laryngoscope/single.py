@@ -17,7 +17,7 @@ from ..._ops import ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
 from .physics import contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
-from .space import BLADE_TYPE, INCISOR_TYPE, DeviceState, LaryngoscopeBase
+from .space import BLADE_TYPE, INCISOR_TYPE, DeviceSpace, DeviceState, LaryngoscopeBase
 
 
 class Laryngoscope(LaryngoscopeBase):
@@ -35,6 +35,7 @@ class Laryngoscope(LaryngoscopeBase):
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact) -> None:
         super().__init__(params, contact, 1)
+        self._space = DeviceSpace(params, 1)
         self._hand, self._blade = self._space.hands[0], self._space.blades[0]
         self._chand, self._cblade, self._cspace = self._hand._body, self._blade._body, self.space._space
         self._loads, self._slopes = contact.loads_list, contact.slopes_list

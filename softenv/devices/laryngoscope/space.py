@@ -138,6 +138,7 @@ class LaryngoscopeBase:
     # the state both keep in their own form: floats and tuples (one device) or arrays (a batch)
     _incisor: Any                             # the incisors' mean force over the last period (N)
     _hand_v: Any                              # the hand's last velocities: x, z, pitch rate, lateral
+    _space: DeviceSpace                       # pymunk's (the single device, the pymunk batch)
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         self.params = params
@@ -146,7 +147,6 @@ class LaryngoscopeBase:
         self.h = params.dt / self.n_substeps
         self.c = substep_constants(params, contact, self.h)
         self.n = n
-        self._space = DeviceSpace(params, n)
         self._forget()
 
     def _forget(self) -> None:
