@@ -11,7 +11,7 @@
 2. Soak: 1,000,000 steps of SoftSphere-v0 and of each laryngoscope id in one process, and each
    laryngoscope id's batched twin at 1,024 envs for 10,000 steps; half random, half bang-bang actions:
    memory at each tenth (Python allocations and the process's resident size), speed early and late,
-   the soaked env's speed over a fresh copy of it (pickled at the end), and the same-seed episode at the
+   the soaked env's speed over a fresh copy of it (deep-copied at the end), and the same-seed episode at the
    start and at the end, compared bit for bit.
 3. Input classes: the hostile-input tests (``tests/test_surfaces.py`` and the cases of other test files
    named in ``HOSTILE_TESTS``) run under hypothesis's ``long`` profile; each counts the cases it tries
@@ -25,8 +25,8 @@
 from __future__ import annotations
 
 import argparse
+import copy
 import gc
-import pickle
 import sys
 import time
 import tracemalloc
@@ -144,11 +144,11 @@ def halves_of(values: list[float]) -> list[tuple[float, float]]:
 
 
 def soaked_over_fresh(env: Any, draw: Any, n_envs: int, block: int, rounds: int = 6) -> float:
-    """The soaked env's speed over that of a fresh copy of it (pickled and loaded: the same state, every
+    """The soaked env's speed over that of a fresh copy of it (deep-copied: rebuilt from its state, every
     object new), their blocks of ``block`` steps interleaved on the same actions and timed back to back in
     CPU time; the median of the rounds' ratios. What a long run leaves behind (a degraded spatial index, a
     fragmented heap, a grown cache) slows the soaked env alone; the machine's load slows both alike."""
-    fresh = pickle.loads(pickle.dumps(env))
+    fresh = copy.deepcopy(env)
     ratios = []
     for r in range(rounds):
         actions = [draw() for _ in range(block)]
@@ -330,7 +330,7 @@ def main() -> None:
               "would slow the pymunk single env 17-fold) and the resident size; env steps per CPU second early and "
               "late in each half (the best of its first two tenths and of its last two), shown, not judged: on this "
               "shared 2-core VM they vary +-20 % with nothing else running. Slowdown is judged against a fresh copy of "
-              "the soaked env (pickled and loaded at the end: the same state, every object new), stepped in blocks "
+              "the soaked env (deep-copied at the end: rebuilt from its state, every object new), stepped in blocks "
               "of a hundredth of the soak interleaved with the soaked env's on the same random actions, each pair "
               "timed back to back in CPU time: the soaked env's speed over the copy's (median of 6 rounds). What a "
               "long run leaves behind (a degraded spatial index, a fragmented heap, a grown cache) slows the soaked "

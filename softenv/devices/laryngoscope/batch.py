@@ -10,11 +10,11 @@ with ``ArrayOps``, on one of two engines for the blade, its coupling and the inc
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pymunk
 import pymunk.batch
-
-import math
 
 from ..._ops import ArrayOps
 from ..contact import TongueContact
@@ -246,8 +246,7 @@ class LaryngoscopeArrays(ArrayLaryngoscopes):
         total = np.zeros((self.n, 2))
         for slot in range(2):                       # cpArbiterTotalImpulse: the contacts' impulses summed
             on = (touching & arbiters.exists[:, slot])[:, None]
-            jx, jy = arbiters.normal[:, 0] * arbiters.jn[:, slot] - arbiters.normal[:, 1] * arbiters.jt[:, slot], \
-                arbiters.normal[:, 0] * arbiters.jt[:, slot] + arbiters.normal[:, 1] * arbiters.jn[:, slot]
+            jx, jy = incisors.rotate(arbiters.normal, arbiters.jn[:, slot], arbiters.jt[:, slot])
             total = np.where(on, total + np.stack([jx, jy], axis=1), total)
         impulse += np.where(touching, np.sqrt(total[:, 0] * total[:, 0] + total[:, 1] * total[:, 1]), 0.0)
         self._touched |= touching

@@ -170,7 +170,6 @@ class Arbiters:
     jt: np.ndarray
     first: np.ndarray | None = None
     normal: np.ndarray | None = None
-    r1: np.ndarray | None = None
     r2: np.ndarray | None = None
     n_mass: np.ndarray | None = None
     t_mass: np.ndarray | None = None
@@ -204,14 +203,14 @@ def _max0(x: np.ndarray) -> np.ndarray:
     return np.where(x > 0.0, x, 0.0)                  # cpfmax(x, 0): 0.0, never -0.0
 
 
-def _rotate(n: np.ndarray, jn: np.ndarray, jt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def rotate(n: np.ndarray, jn: np.ndarray, jt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return n[:, 0] * jn - n[:, 1] * jt, n[:, 0] * jt + n[:, 1] * jn
 
 
-def prestep(arb: Arbiters, s: Solver, px: np.ndarray, py: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray,
-            vx: np.ndarray, vy: np.ndarray, w: np.ndarray) -> np.ndarray:
+def prestep(arb: Arbiters, s: Solver, px: np.ndarray, py: np.ndarray, cos_a: np.ndarray,
+            sin_a: np.ndarray) -> np.ndarray:
     """Collide, update each device's arbiter (cpArbiterUpdate, the cache's filter) and pre-step its
-    contacts (cpArbiterPreStep) at the blade's new pose and its velocity before the step's forces.
+    contacts (cpArbiterPreStep) at the blade's new pose.
     Returns which devices touch the incisors this step."""
     vertices = transformed(s.local, px, py, cos_a, sin_a)
     normals = transformed(s.local_normals, px, py, cos_a, sin_a, offset=False)
@@ -235,7 +234,7 @@ def prestep(arb: Arbiters, s: Solver, px: np.ndarray, py: np.ndarray, cos_a: np.
     n = arb.normal
     r1 = on_segment - 0.0                                # the static body sits at the origin
     r2 = on_blade - np.stack([px, py], axis=1)[:, None, :]
-    arb.r1, arb.r2 = r1, r2
+    arb.r2 = r2
     rcn = r2[..., 0] * n[:, None, 1] - r2[..., 1] * n[:, None, 0]
     arb.n_mass = 1.0 / (0.0 + (s.m_inv + s.i_inv * rcn * rcn))
     rct = r2[..., 0] * n[:, None, 0] - r2[..., 1] * -n[:, None, 1]
@@ -254,7 +253,7 @@ def apply_cached(arb: Arbiters, touching: np.ndarray, s: Solver, dt_coef: float,
     assert arb.normal is not None and arb.r2 is not None and arb.first is not None
     for slot in range(2):
         on = touching & ~arb.first & arb.exists[:, slot]
-        jx, jy = _rotate(arb.normal, arb.jn[:, slot], arb.jt[:, slot])
+        jx, jy = rotate(arb.normal, arb.jn[:, slot], arb.jt[:, slot])
         jx, jy = jx * dt_coef, jy * dt_coef
         r2x, r2y = arb.r2[:, slot, 0], arb.r2[:, slot, 1]
         vx = np.where(on, vx + jx * s.m_inv, vx)
@@ -294,7 +293,7 @@ def apply_impulse(arb: Arbiters, touching: np.ndarray, s: Solver, bounce: np.nda
         x = np.where(x > -jt_max, x, -jt_max)
         jt_acc = np.where(x < jt_max, x, jt_max)
         bx, by = nx * (j_bias - jbn_old), ny * (j_bias - jbn_old)
-        jx, jy = _rotate(n, jn_acc - jn_old, jt_acc - jt_old)
+        jx, jy = rotate(n, jn_acc - jn_old, jt_acc - jt_old)
         bias[0] = np.where(on, bvx + bx * s.m_inv, bvx)
         bias[1] = np.where(on, bvy + by * s.m_inv, bvy)
         bias[2] = np.where(on, bw + s.i_inv * (r2x * by - r2y * bx), bw)

@@ -89,7 +89,7 @@ def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[A
         teeth.bias = [np.zeros_like(bvx), np.zeros_like(bvy), np.zeros_like(bw)]
     ca, sa, cp, sp = ops.cos(a), ops.sin(a), ops.cos(pitch), ops.sin(pitch)
     if teeth is not None:                       # collide, then the arbiters' pre-step before the springs'
-        touching = incisors.prestep(teeth.arbiters, teeth.solver, px, py, ca, sa, vx, vy, w)
+        touching = incisors.prestep(teeth.arbiters, teeth.solver, px, py, ca, sa)
         bounce = incisors.bounce_velocity(teeth.arbiters, vx, vy, w)
     qx, qy = c.grip
     r2x, r2y = ca * qx + -sa * qy, sa * qx + ca * qy
