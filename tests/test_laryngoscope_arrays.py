@@ -15,6 +15,7 @@ from pymunk._chipmunk import lib
 
 from softenv._ops import ArrayOps, ScalarOps
 from softenv.devices.laryngoscope.batch import LaryngoscopeArrays
+from softenv.devices.laryngoscope.kernel import LaryngoscopeKernel
 from softenv.devices.laryngoscope.incisors import Arbiters, Solver, collide, polygon_planes, transformed
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
@@ -155,19 +156,22 @@ def test_the_blade_levered_on_the_incisors_steps_as_pymunk_steps_it_bit_for_bit(
     assert firsts > 2 * n                            # contacts made, lost and made again
 
 
+@pytest.mark.parametrize("engine", [LaryngoscopeArrays, LaryngoscopeKernel], ids=["numpy", "compiled"])
 @pytest.mark.parametrize("sections, periods, on_incisors", [
     ({}, 400, 10),
     ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 40, 0),
 ], ids=["default", "stiff"])
-def test_every_device_of_the_array_batch_equals_a_single_pymunk_device_bit_for_bit(sections, periods, on_incisors):
-    """LaryngoscopeArrays (no pymunk space) against single pymunk devices, each of 4 with its own
-    actions: pressing, sweeping, levering on the incisors and into the walls, idle; the same state after
-    every control period (blade, hand, lateral, tongue and incisor contact, hand velocity) and the same
-    observation. The stiff corner: 1e6 N/m coupling, 10 g blade, 10 MPa tongue."""
+def test_every_device_of_the_array_batch_equals_a_single_pymunk_device_bit_for_bit(sections, periods, on_incisors,
+                                                                                  engine):
+    """LaryngoscopeArrays (no pymunk space) and LaryngoscopeKernel (its float twin, compiled) against
+    single pymunk devices, each of 4 with its own actions: pressing, sweeping, levering on the incisors
+    and into the walls, idle; the same state after every control period (blade, hand, lateral, tongue and
+    incisor contact, hand velocity) and the same observation. The stiff corner: 1e6 N/m coupling, 10 g
+    blade, 10 MPa tongue."""
     world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], sections))
     parts = laryngoscope_parts(world.scene, world.config)
     n = 4
-    singles, batch = [Laryngoscope(*parts) for _ in range(n)], LaryngoscopeArrays(*parts, n)
+    singles, batch = [Laryngoscope(*parts) for _ in range(n)], engine(*parts, n)
     rng = np.random.default_rng(4)
     actions = rng.uniform(-1, 1, (periods, n, 4))
     part = periods // 8

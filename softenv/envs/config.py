@@ -17,6 +17,7 @@ from typing import Any, Callable
 
 from .._validation import check_choice, check_int, check_real
 from ..devices.base import device_kind
+from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES
 from ..fem.params import FE_POISSON
 from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
@@ -162,6 +163,9 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "max_substep": Field(1e-3, "s", "[1e-6, 1e-3]", _real(1e-6, 1e-3), "longest physics substep (1 kHz or finer)"),
         "haptic_preset": Field("omega", "", "touch | falcon | omega", _choice("touch", "falcon", "omega"),
                                "force-feedback device whose limits shape haptic_force_N"),
+        "batch_engine": Field("compiled", "", "compiled | numpy | pymunk", _choice(*BATCH_ENGINES),
+                              "the laryngoscope batched (vector envs): compiled (numba, a loop over devices) and "
+                              "numpy (arrays) equal the single env bit for bit; pymunk (one space) agrees to rounding"),
     },
     "dynamics": {
         "kind": Field("quasi_static", "", "quasi_static | viscoelastic", _choice("quasi_static", "viscoelastic"),
@@ -330,9 +334,13 @@ FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of 
 
 def config_key(config: dict[str, dict[str, Any]], sections: tuple[str, ...]) -> str:
     """A stable text key of some sections (for caches and saved agents). An analytic tissue is keyed
-    as before the fem model existed (resolved E and nu, no FE keys), so caches and agents made then
-    stay valid."""
+    as before the fem model existed (resolved E and nu, no FE keys), and a device batched by an exact
+    engine as before ``device.batch_engine`` existed, so caches and agents made then stay valid."""
     keyed = dict(config)
+    device = config.get("device")
+    if device is not None and device.get("batch_engine") in EXACT_ENGINES:
+        # engines that equal the single env bit for bit make the same runs: keyed as before the setting
+        keyed["device"] = {k: v for k, v in device.items() if k != "batch_engine"}
     t = config.get("tissue")
     if t is not None and t["model"] == "analytic":
         E, nu = material(t)

@@ -7,7 +7,9 @@ A package split by job; only the modules marked pymunk import it:
 * :mod:`.physics` -- the arithmetic single and batch share, written once against ``ops`` (floats or arrays).
 * :mod:`.space` -- the pymunk space of ``n`` devices, their state, and the readings both share (pymunk).
 * :mod:`.single` -- one device on Python floats: the single env and the 1 kHz haptic loop (pymunk).
-* :mod:`.batch` -- ``n`` devices on arrays with ``pymunk.batch`` (pymunk).
+* :mod:`.rigid`, :mod:`.incisors` -- the blade, its coupling and the incisors as Chipmunk steps them, on arrays.
+* :mod:`.batch` -- ``n`` devices on arrays: with ``pymunk.batch`` or with :mod:`.rigid` (pymunk).
+* :mod:`.kernel` -- ``n`` devices in one compiled loop (numba): the batch's default engine.
 * :mod:`.part` -- the env-facing parts (the device contract of :mod:`softenv.devices.base`): workspace
   clip, the incisor reward term, info keys, the clinical record (pymunk).
 
@@ -27,6 +29,9 @@ LARYNGOSCOPE_OBS = ("blade_x", "blade_z", "blade_pitch", "blade_y", "blade_vx", 
 # scales of the observation (value / scale, then squashed)
 POSITION_SCALE, ANGLE_SCALE, LATERAL_SCALE = 0.05, 0.5, 0.02             # m, rad, m
 SPEED_SCALE, SPIN_SCALE, LATERAL_SPEED_SCALE = 0.2, 2.0, 0.1             # m/s, rad/s, m/s
+# the batch's engines (device.batch_engine): compiled (numba) and numpy equal the single device bit for bit
+BATCH_ENGINES = ("compiled", "numpy", "pymunk")
+EXACT_ENGINES = ("compiled", "numpy")
 
 
 def _single(scene: DeviceScene, config: Config) -> Any:

@@ -113,7 +113,7 @@ def collide(segment: tuple[tuple[float, float], tuple[float, float]], radius: fl
     normal = np.where(vertex_pair[:, None], p * (1.0 / (d2 + TINY))[:, None], normal)
     d = np.where(vertex_pair, d2, d)
     # SupportEdgeForSegment(seg, n) and SupportEdgeForPoly(poly, -n)
-    tn = _segment_normal(ends)
+    tn = segment_normal(ends)
     forward = _dot(tn[None], normal) > 0.0
     s_a = np.where(forward[:, None], ends[0], ends[1])
     s_b = np.where(forward[:, None], ends[1], ends[0])
@@ -144,7 +144,7 @@ def collide(segment: tuple[tuple[float, float], tuple[float, float]], radius: fl
     return normal, np.stack(points_a, axis=1), np.stack(points_b, axis=1), np.stack(exists, axis=1), features
 
 
-def _segment_normal(ends: np.ndarray) -> np.ndarray:
+def segment_normal(ends: np.ndarray) -> np.ndarray:
     """``cpSegmentShape``'s normal: ``rperp`` of the unit direction from ``a`` to ``b``."""
     delta = ends[1] - ends[0]
     unit = delta * (1.0 / (np.sqrt(_dot(delta, delta)) + TINY))

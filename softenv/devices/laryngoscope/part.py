@@ -12,13 +12,17 @@ from ... import clinical
 from ..base import Config, DeviceScene
 from ..contact import TongueContact
 from . import LARYNGOSCOPE_OBS
-from .batch import LaryngoscopeBatch
+from .batch import ArrayLaryngoscopes, LaryngoscopeArrays, LaryngoscopeBatch
+from .kernel import LaryngoscopeKernel
 from .params import LaryngoscopeParams
 from .single import Laryngoscope
 from .space import DeviceState
 
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")
+# device.batch_engine -> the batch it builds
+ENGINES: dict[str, type[ArrayLaryngoscopes]] = {"compiled": LaryngoscopeKernel, "numpy": LaryngoscopeArrays,
+                                                "pymunk": LaryngoscopeBatch}
 
 
 def laryngoscope_parts(scene: DeviceScene, config: Config) -> tuple[LaryngoscopeParams, TongueContact]:
@@ -130,9 +134,11 @@ class LaryngoscopePart(PickledByState):
 
 
 class LaryngoscopePartBatch(PickledByState):
-    """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`), in one pymunk
-    space (:class:`~.batch.LaryngoscopeBatch`): device 0 equals a single one bit for bit, the others
-    agree to rounding (each sits at its own place in the space)."""
+    """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`) on the engine
+    ``device.batch_engine`` names (:data:`ENGINES`): ``compiled`` (:class:`~.kernel.LaryngoscopeKernel`,
+    the default) and ``numpy`` (:class:`~.batch.LaryngoscopeArrays`) equal single devices bit for bit;
+    ``pymunk`` (:class:`~.batch.LaryngoscopeBatch`, one space) does for device 0, the others agree to
+    rounding (each sits at its own place in the space)."""
 
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
@@ -141,7 +147,7 @@ class LaryngoscopePartBatch(PickledByState):
 
     def __init__(self, scene: DeviceScene, config: Config, n: int) -> None:
         self._scene, self._config = scene, config
-        self.laryngoscopes = LaryngoscopeBatch(*laryngoscope_parts(scene, config), n)
+        self.laryngoscopes = self._rebuilt_for(n)
         self._start_state = self.laryngoscopes.start_state(n)
         self._workspace = scene.workspace
         self._rest = scene.rest_features
@@ -193,5 +199,9 @@ class LaryngoscopePartBatch(PickledByState):
     def load_state(self, state: Any) -> None:
         self.laryngoscopes.load_state(state)
 
-    def _rebuilt(self, state: DeviceState) -> LaryngoscopeBatch:
-        return LaryngoscopeBatch(*laryngoscope_parts(self._scene, self._config), len(state.blade))
+    def _rebuilt_for(self, n: int) -> ArrayLaryngoscopes:
+        engine = ENGINES[self._config["device"]["batch_engine"]]
+        return engine(*laryngoscope_parts(self._scene, self._config), n)
+
+    def _rebuilt(self, state: DeviceState) -> ArrayLaryngoscopes:
+        return self._rebuilt_for(len(state.blade))
