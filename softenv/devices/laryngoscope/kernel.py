@@ -66,6 +66,20 @@ def _lerp_t(ax: float, ay: float, bx: float, by: float, t: float) -> tuple[float
     return ax * (0.5 - ht) + bx * (0.5 + ht), ay * (0.5 - ht) + by * (0.5 + ht)
 
 
+@numba.njit(inline="always")
+def _separated(ends: np.ndarray, radius: float, vw: np.ndarray, nw: np.ndarray) -> bool:
+    """Whether the segment's two ends lie further than ``radius`` (and a margin far above rounding)
+    outside one of the blade's edges: the blade, convex, then clears the rounded segment, and
+    :func:`_collide` would find no contact."""
+    gap = radius * (1.0 + 1e-9) + 1e-12
+    for j in range(vw.shape[0]):
+        nx, ny = nw[j, 0], nw[j, 1]
+        plane = nx * vw[j, 0] + ny * vw[j, 1]
+        if nx * ends[0, 0] + ny * ends[0, 1] - plane > gap and nx * ends[1, 0] + ny * ends[1, 1] - plane > gap:
+            return True
+    return False
+
+
 @numba.njit
 def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.ndarray, nw: np.ndarray,
              out: np.ndarray, feat: np.ndarray) -> tuple[float, float, bool, bool]:
@@ -125,7 +139,7 @@ def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.nda
     e1_denom = 1.0 / (d1b - d1a + TINY)
     e2_denom = 1.0 / (d2b - d2a + TINY)
     feat[0, 0], feat[0, 1], feat[1, 0], feat[1, 1] = sa, qb, sb, qa
-    exists = [False, False]
+    exists0 = exists1 = False
     for slot in range(2):
         first, second = (d2b - d1a, d1a - d2a) if slot == 0 else (d2a - d1a, d1b - d2a)
         u = _clip(first * e1_denom, 0.0, 1.0)
@@ -133,8 +147,12 @@ def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.nda
         p1x, p1y = nx * radius + (sax * (1.0 - u) + sbx * u), ny * radius + (say * (1.0 - u) + sby * u)
         p2x, p2y = nx * -0.0 + (qax * (1.0 - v) + qbx * v), ny * -0.0 + (qay * (1.0 - v) + qby * v)
         out[slot, 0], out[slot, 1], out[slot, 2], out[slot, 3] = p1x, p1y, p2x, p2y
-        exists[slot] = touching and (p2x - p1x) * nx + (p2y - p1y) * ny <= 0.0
-    return nx, ny, exists[0], exists[1]
+        exists = touching and (p2x - p1x) * nx + (p2y - p1y) * ny <= 0.0
+        if slot == 0:
+            exists0 = exists
+        else:
+            exists1 = exists
+    return nx, ny, exists0, exists1
 
 
 @numba.njit
@@ -150,6 +168,8 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
     lo, hi = c.low, c.high
     m_inv, i_inv, qx, qy, k_lin, c_lin, k_rot, c_rot = coupling
     count_v = local.shape[0]
+    i_sum = 1.0 / i_inv
+    w_coef = 1.0 - math.exp(-c_rot * h * i_inv)
     vw, nw = np.empty((count_v, 2)), np.empty((count_v, 2))
     points, feat_new = np.empty((2, 4)), np.empty((2, 2), dtype=np.int64)
     feat = np.empty((2, 2), dtype=np.int64)
@@ -168,13 +188,13 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
         bvx = bvy = bw = 0.0
         impulse = 0.0
         hvx = hvy = hw = hl = P = Q = cx = cy = 0.0
+        ca, sa = math.cos(a), math.sin(a)
         for _ in range(count):
             hvx = _clip(vX, (lo[0] - gx) / h, (hi[0] - gx) / h)
             hvy = _clip(vY, (lo[1] - gy) / h, (hi[1] - gy) / h)
             hw = _clip(spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h)
             hl = _clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
             hand_lat = hand_lat + h * hl
-            ca, sa = math.cos(a), math.sin(a)
             fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue_substep(
                 (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
                 loads, slopes, c)
@@ -182,40 +202,44 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
             gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
             px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
             bvx = bvy = bw = 0.0
-            ca, sa, cp, sp = math.cos(a), math.sin(a), math.cos(pitch), math.sin(pitch)
+            ca, sa, cp, sp = math.cos(a), math.sin(a), math.cos(pitch), math.sin(pitch)    # the next tongue's too
             # incisors.prestep: collide, update the arbiter, pre-step its contacts
             for j in range(count_v):
                 lx, ly = local[j, 0], local[j, 1]
                 vw[j, 0], vw[j, 1] = (ca * lx + -sa * ly) + px, (sa * lx + ca * ly) + py
                 lx, ly = local_normals[j, 0], local_normals[j, 1]
                 nw[j, 0], nw[j, 1] = ca * lx + -sa * ly, sa * lx + ca * ly
-            nnx, nny, ex_new[0], ex_new[1] = _collide(ends, seg_normal, radius, vw, nw, points, feat_new)
-            touching = ex_new[0] or ex_new[1]
-            jn_new[:], jt_new[:] = 0.0, 0.0
-            for new in range(2):
-                for old in range(2):
-                    if alive and ex[old] and feat_new[new, 0] == feat[old, 0] and feat_new[new, 1] == feat[old, 1]:
-                        jn_new[new], jt_new[new] = jn[old], jt[old]
-            first = touching and not (alive and ticks == 0)
-            ticks = 0 if touching else ticks + 1
-            alive = touching or (alive and ticks < PERSISTENCE)
-            if touching:
-                ex[:], feat[:, :], jn[:], jt[:] = ex_new, feat_new, jn_new, jt_new
-            if touching or not has_normal:
-                anx, any_, has_normal = nnx, nny, True
-            for s in range(2):
-                r1x, r1y = points[s, 0] - 0.0, points[s, 1] - 0.0
-                r2x[s], r2y[s] = points[s, 2] - px, points[s, 3] - py
-                rcn = r2x[s] * any_ - r2y[s] * anx
-                n_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rcn * rcn))
-                rct = r2x[s] * anx - r2y[s] * -any_
-                t_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rct * rct))
-                dist = ((r2x[s] - r1x) + px) * anx + ((r2y[s] - r1y) + py) * any_
-                low = dist + slop
-                bias[s] = -bias_coef * (0.0 if 0.0 < low else low) / h
-                j_bias[s] = 0.0
-                # incisors.bounce_velocity
-                bounce[s] = ((vx + -r2y[s] * w) * anx + (vy + r2x[s] * w) * any_) * (0.0 * 0.0)
+            if not alive and _separated(ends, radius, vw, nw):
+                touching = first = False        # no contact, no arbiter: only its age changes, as _collide's would
+                ticks += 1
+            else:
+                nnx, nny, ex_new[0], ex_new[1] = _collide(ends, seg_normal, radius, vw, nw, points, feat_new)
+                touching = ex_new[0] or ex_new[1]
+                jn_new[:], jt_new[:] = 0.0, 0.0
+                for new in range(2):
+                    for old in range(2):
+                        if alive and ex[old] and feat_new[new, 0] == feat[old, 0] and feat_new[new, 1] == feat[old, 1]:
+                            jn_new[new], jt_new[new] = jn[old], jt[old]
+                first = touching and not (alive and ticks == 0)
+                ticks = 0 if touching else ticks + 1
+                alive = touching or (alive and ticks < PERSISTENCE)
+                if touching:
+                    ex[:], feat[:, :], jn[:], jt[:] = ex_new, feat_new, jn_new, jt_new
+                if touching or not has_normal:
+                    anx, any_, has_normal = nnx, nny, True
+                for s in range(2):
+                    r1x, r1y = points[s, 0] - 0.0, points[s, 1] - 0.0
+                    r2x[s], r2y[s] = points[s, 2] - px, points[s, 3] - py
+                    rcn = r2x[s] * any_ - r2y[s] * anx
+                    n_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rcn * rcn))
+                    rct = r2x[s] * anx - r2y[s] * -any_
+                    t_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rct * rct))
+                    dist = ((r2x[s] - r1x) + px) * anx + ((r2y[s] - r1y) + py) * any_
+                    low = dist + slop
+                    bias[s] = -bias_coef * (0.0 if 0.0 < low else low) / h
+                    j_bias[s] = 0.0
+                    # incisors.bounce_velocity
+                    bounce[s] = ((vx + -r2y[s] * w) * anx + (vy + r2x[s] * w) * any_) * (0.0 * 0.0)
             # 2. the springs' explicit impulses
             gqx, gqy = ca * qx + -sa * qy, sa * qx + ca * qy
             for s in range(2):
@@ -232,8 +256,6 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
                 w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
                 springs[s, 0], springs[s, 1], springs[s, 2], springs[s, 3] = r1x, r1y, nx, ny
                 springs[s, 4], springs[s, 5], springs[s, 6], springs[s, 7] = 1.0 / kk, 1.0 - math.exp(-c_lin * h * kk), 0.0, j
-            i_sum = 1.0 / i_inv
-            w_coef = 1.0 - math.exp(-c_rot * h * i_inv)
             j_rot = ((pitch - a) - 0.0) * k_rot * h
             w = w + j_rot * i_inv
             target_wrn = 0.0
