@@ -59,13 +59,7 @@ def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
     env = gym.make(ENV_ID)
     r = measure(lambda: env.reset(), number=50 if quick else 200, repeats=5)
     rows.append(Row("haptic", f"{ENV_ID}: reset", r.median * 1e6, "us", spread_us(r)))
-    n = 1024
-    calls = 4 if quick else 12
-    for label, batch_actions in (("random actions", None), ("pressing actions", list(press_actions(rng, (8, n, 4))))):
-        t = twin_step_timing(ENV_ID, n, calls, batch_actions)
-        rate = n / t.median
-        rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs ({label})", rate, "env-steps/s",
-                        f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}", ">= 25,000/s", rate >= 25_000))
+    rows += batch_rows(quick, cart, rng)
     for env_id in HAPTIC_SCENES:
         per_env = state_bytes_per_env(env_id, 256)
         rows.append(Row("haptic", f"{env_id}: batched twin state per env (traced allocations, pymunk's C memory "
@@ -73,6 +67,60 @@ def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
                         target="<= 200 KB", ok=per_env <= 200e3))
     rows += extreme_rows(quick)
     return rows
+
+
+BATCH_SIZES = (1, 8, 64, 1024, 8192, 65536)
+TARGET_OVER_CARTPOLE = 1.25      # issue 37: 250,000 env-steps/s at 1,024 envs where CartPole-v1 runs 200,000
+
+
+def batch_rows(quick: bool, cart: float, rng: np.random.Generator) -> list[Row]:
+    """The batched twin on its default engine (``device.batch_engine="compiled"``) over batch sizes, the
+    other engines at 1,024 envs, and 8 single envs stepped one after another (as SB3's ``DummyVecEnv``
+    steps them) against the batch of 8."""
+    rows: list[Row] = []
+    best = 0.0
+    for n in BATCH_SIZES[:-1] if quick else BATCH_SIZES:
+        t = twin_step_timing(ENV_ID, n, max(2, (2_000 if quick else 20_000) // n))
+        rate = n / t.median
+        spread = f"{rate / cart:.2f} x CartPole-v1; IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}"
+        if n == 1024:
+            target, ok = f">= {TARGET_OVER_CARTPOLE}x CartPole-v1", rate >= TARGET_OVER_CARTPOLE * cart
+        else:          # the curve never falls (within a tenth: the spread of a shared machine)
+            target, ok = ">= 0.9x the best smaller batch", rate >= 0.9 * best
+        rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs (compiled engine, random actions)", rate,
+                        "env-steps/s", spread, target, ok))
+        best = max(best, rate)
+        if n == 8:
+            eight = 8 / single_envs_step_time(8, 200 if quick else 1000)
+            rows.append(Row("haptic", f"{ENV_ID}: 8 single envs stepped in turn (as DummyVecEnv)", eight, "env-steps/s",
+                            f"the batch of 8 above: {rate / eight:.1f}x", "batch of 8 >= 1x", rate >= eight))
+    n = 1024
+    t = twin_step_timing(ENV_ID, n, 4 if quick else 12, list(press_actions(rng, (8, n, 4))))
+    rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs (compiled engine, pressing actions)", n / t.median,
+                    "env-steps/s", f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}"))
+    for engine in ("numpy", "pymunk"):
+        t = twin_step_timing(ENV_ID, n, 2 if quick else 6, device={"batch_engine": engine})
+        rows.append(Row("haptic", f"{ENV_ID}: batched twin, {n} envs ({engine} engine, random actions)", n / t.median,
+                        "env-steps/s", f"IQR {n / t.p75:,.0f}-{n / t.p25:,.0f}"))
+    return rows
+
+
+def single_envs_step_time(n: int, steps: int) -> float:
+    """Seconds for ``n`` single envs to take one step each, in turn (median of 5 repeats of ``steps``)."""
+    envs = [gym.make(ENV_ID) for _ in range(n)]
+    for i, env in enumerate(envs):
+        env.reset(seed=i)
+    actions = np.random.default_rng(1).uniform(-1, 1, (64, n, 4)).astype(np.float32)
+    samples = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for k in range(steps):
+            for env, a in zip(envs, actions[k % 64]):
+                _, _, terminated, truncated, _ = env.step(a)
+                if terminated or truncated:
+                    env.reset()
+        samples.append((time.perf_counter() - t0) / steps)
+    return float(np.median(samples))
 
 
 EXTREMES: dict[str, dict] = {
