@@ -185,6 +185,7 @@ def test_bad_action_raises_and_leaves_the_state_unchanged(bad):
     ({"coupling_damping": float("nan")}, "device.coupling_damping"),
     ({"max_substep": 0.01}, "device.max_substep"),
     ({"haptic_preset": "phantom"}, "device.haptic_preset"),
+    ({"batch_engine": "mujoco"}, "device.batch_engine"),
     ({"stiffness": 1.0}, "valid keys"),
 ])
 def test_bad_device_parameters_name_the_key_and_range(device, match):

@@ -24,9 +24,9 @@ class SoftSphereVectorEnv(VectorEnv):
 
     Seeding follows Gymnasium's vector envs: ``reset(seed=s)`` seeds env ``i`` with ``s + i``, so
     this env equals ``num_envs`` :class:`~softenv.envs.single.SoftSphereEnv` seeded alike
-    (observations, rewards, flags and infos) bit for bit with the ideal device; with the laryngoscope
-    env 0 does, and the others agree to rounding (each device sits at its own place in one pymunk
-    space: :mod:`softenv.devices.laryngoscope.space`). ``backend="torch"`` through ``gym.make_vec``
+    (observations, rewards, flags and infos) bit for bit, the laryngoscope included on its default
+    engine (``device.batch_engine``: ``"compiled"`` or ``"numpy"``; with ``"pymunk"``, one space, env 0
+    does and the others agree to rounding: :mod:`softenv.devices.laryngoscope.part`). ``backend="torch"`` through ``gym.make_vec``
     makes the torch twin instead (:func:`softenv.envs.make.make_vector_env`). Episodes end after the
     scene's ``task.horizon`` steps, or after ``max_episode_steps`` where that is fewer (a time limit, as
     ``gym.make(..., max_episode_steps=m)`` puts on the single env; the task keeps its horizon).
