@@ -108,11 +108,14 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
     return sorted(out, key=expected)
 
 
-def baseline_job(name: str, scene: str, episodes: int) -> Episodes:
-    """Evaluate one baseline on one scene's test targets."""
+def baseline_job(name: str, scene: str, episodes: int, vectorization_mode: str = "vector_entry_point",
+                 **make: Any) -> Episodes:
+    """Evaluate one baseline on one scene's test targets (``evaluate``'s ``vectorization_mode`` and
+    scene ``make`` overrides passed on)."""
     _, kwargs = scene_kwargs(scene)
     kwargs.pop("obs_mode")
-    return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes)
+    return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes,
+                    vectorization_mode=vectorization_mode, **make)
 
 
 AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]

@@ -73,13 +73,22 @@ class Episodes:
         return out
 
 
-def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int] = 1000) -> Episodes:
-    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin), env ``i``
-    seeded ``seed + i`` (or ``seed[i]``). A policy that plans offline reports its own ``decision_us``."""
+def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int] = 1000,
+             vectorization_mode: str = "vector_entry_point", **make: Any) -> Episodes:
+    """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin, or with
+    ``vectorization_mode="sync"`` of as many single envs), env ``i`` seeded ``seed + i`` (or ``seed[i]``);
+    ``make`` overrides scene sections (``device={"batch_engine": ...}``). A policy that plans offline
+    reports its own ``decision_us``."""
     obs_mode = getattr(policy, "obs_mode", "vector")
     env_id, kwargs = scene_kwargs(scene, obs_mode)
-    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
-                        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
+    for section, values in make.items():
+        kwargs[section] = {**kwargs.get(section, {}), **values}
+    if vectorization_mode == "sync":
+        venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="sync",
+                            vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}, **kwargs)
+    else:
+        venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode=vectorization_mode,
+                            autoreset_mode=gym.vector.AutoresetMode.SAME_STEP, **kwargs)
     policy.reset()
     obs, _ = venv.reset(seed=seed)  # type: ignore[arg-type]  # SoftSphere's vector env takes a seed per env
     done = np.zeros(episodes, dtype=bool)

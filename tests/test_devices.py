@@ -124,14 +124,17 @@ def test_the_scene_device_section_reaches_the_torch_backend():
     assert str(env.unwrapped.torch_device) == "cpu"
 
 
-@pytest.mark.parametrize("kind", ["ideal", PROBE, "laryngoscope"])
-def test_a_pickled_vector_env_continues_bit_for_bit(kind, probe_on_path, tried):
-    """Every device's batch pickles and deep-copies (the laryngoscope's pymunk space is rebuilt from its
-    state): a copy taken mid-episode continues as the original, through autoresets, bit for bit."""
+@pytest.mark.parametrize("kind, engine", [("ideal", None), (PROBE, None), ("laryngoscope", "compiled"),
+                                          ("laryngoscope", "numpy"), ("laryngoscope", "pymunk")])
+def test_a_pickled_vector_env_continues_bit_for_bit(kind, engine, probe_on_path, tried):
+    """Every device's batch pickles and deep-copies (the laryngoscope's engines are rebuilt from their
+    state, pymunk's space too): a copy taken mid-episode continues as the original, through autoresets,
+    bit for bit."""
     import copy
 
     tried["batch pickling and copies"] += 2
-    env = SoftSphereVectorEnv(3, device={"kind": kind}, task={"horizon": 12}, autoreset_mode="same_step")
+    device = {"kind": kind} if engine is None else {"kind": kind, "batch_engine": engine}
+    env = SoftSphereVectorEnv(3, device=device, task={"horizon": 12}, autoreset_mode="same_step")
     env.reset(seed=5)
     actions = np.random.default_rng(2).uniform(-1, 1, (30, 3, 4)).astype(np.float32)
     for a in actions[:10]:

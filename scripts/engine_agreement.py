@@ -1,0 +1,76 @@
+"""The laryngoscope's batched twin against single envs over many seeded episodes (issue 37, part 2);
+writes ``results/engine_agreement.md`` and ``.json``.
+
+For each haptic scene and baseline policy, ``--episodes`` test episodes (env ``i`` seeded ``1000 + i``)
+run twice through ``baselines.evaluate``: once on the batched twin with ``--engine`` (all at once), once
+on as many single envs (pymunk, Gymnasium's ``SyncVectorEnv``). Per metric (the episode's score and
+errors, and the clinical metrics): how many episodes agree bit for bit, the largest difference, and the
+two-sample Kolmogorov-Smirnov test's p-value of the two distributions (scipy). With the exact engines
+every episode agrees bit for bit, so any policy (a trained agent included) scores the same on either.
+
+    python scripts/engine_agreement.py [--episodes 1000] [--engine compiled] [--policies zero random expert invert-poly2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import ks_2samp
+
+from baselines.benchmark import baseline_job
+from softenv._artifact import write_text
+from softenv.envs import HAPTIC_SCENES
+
+
+def compare(scene: str, name: str, episodes: int, engine: str) -> dict[str, dict[str, float]]:
+    """Per metric: episodes equal bit for bit, the largest |difference| and the KS p-value."""
+    batch = baseline_job(name, scene, episodes, device={"batch_engine": engine}).values
+    single = baseline_job(name, scene, episodes, "sync").values
+    out = {}
+    for metric, x in batch.items():
+        y = single[metric]
+        same = (x == y) | (np.isnan(x) & np.isnan(y))
+        finite = ~np.isnan(x) & ~np.isnan(y)
+        diff = float(np.max(np.abs(x[finite] - y[finite]))) if finite.any() else 0.0
+        p = float(ks_2samp(x[finite], y[finite]).pvalue) if finite.sum() > 1 else float("nan")
+        out[metric] = {"equal": int(same.sum()), "max_diff": diff, "ks_p": p}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--episodes", type=int, default=1000)
+    parser.add_argument("--engine", default="compiled", choices=("compiled", "numpy", "pymunk"))
+    parser.add_argument("--policies", nargs="+", default=["zero", "random", "expert", "invert-poly2"])
+    parser.add_argument("--out", type=Path, default=Path("results"))
+    args = parser.parse_args()
+    start = time.time()
+    table: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
+    for scene in HAPTIC_SCENES:
+        for name in args.policies:
+            table.setdefault(scene, {})[name] = compare(scene, name, args.episodes, args.engine)
+            print(f"{scene} {name}: done", flush=True)
+    command = "python scripts/engine_agreement.py " + " ".join(sys.argv[1:])
+    lines = [f"# The batched twin ({args.engine} engine) against single envs", "",
+             f"Made by `{command.strip()}` in {time.time() - start:.0f} s: {args.episodes} seeded test episodes of "
+             "each policy on each haptic scene, on the batched twin and on as many single (pymunk) envs. "
+             "Per metric: episodes equal bit for bit, the largest difference, and the two-sample "
+             "Kolmogorov-Smirnov p-value of the two distributions.", "",
+             "| scene | policy | metric | equal episodes | largest difference | KS p-value |", "|---|---|---|---|---|---|"]
+    for scene, policies in table.items():
+        for name, metrics in policies.items():
+            for metric, r in metrics.items():
+                lines.append(f"| {scene} | {name} | {metric} | {r['equal']} / {args.episodes} | {r['max_diff']:.3g} | "
+                             f"{r['ks_p']:.3g} |")
+    write_text(args.out / "engine_agreement.md", "\n".join(lines) + "\n")
+    write_text(args.out / "engine_agreement.json", json.dumps({"command": command, "engine": args.engine,
+                                                               "episodes": args.episodes, "table": table}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
