@@ -185,7 +185,34 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
                             "<= 1.3x" if is_target else "", ratio <= 1.3 if is_target else None))
             adapters[name].close()
         twin.close()
+    rows.append(ppo_row(quick))
     return rows
+
+
+def ppo_row(quick: bool, n: int = 8) -> Row:
+    """stable-baselines3's PPO (its defaults) training on SoftSphereHaptic-v0 through the adapter over
+    the batched twin, against PPO on CartPole-v1 in SB3's ``DummyVecEnv``, both with ``n`` envs; CPU
+    time per environment step over whole ``learn`` calls (rollouts and updates), repeats interleaved."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from ..envs.sb3 import SoftSphereSB3VecEnv
+
+    steps = 4096 if quick else 16384
+    models = {"haptic": PPO("MlpPolicy", SoftSphereSB3VecEnv(n, "SoftSphereHaptic-v0"), n_steps=steps // n, seed=0),
+              "cartpole": PPO("MlpPolicy", make_vec_env("CartPole-v1", n_envs=n, seed=0), n_steps=steps // n, seed=0)}
+    for model in models.values():                  # the first call compiles and warms up
+        model.learn(steps)
+    samples: dict[str, list[float]] = {name: [] for name in models}
+    for _ in range(3):
+        for name, model in models.items():
+            t0 = time.process_time()
+            model.learn(steps, reset_num_timesteps=False)
+            samples[name].append(steps / (time.process_time() - t0))
+    haptic, cart = float(np.median(samples["haptic"])), float(np.median(samples["cartpole"]))
+    return Row("sb3", f"SoftSphereHaptic-v0: SB3 PPO through the adapter, {n} envs, over PPO on CartPole-v1",
+               haptic / cart, "x CartPole-v1's PPO", f"{haptic:,.0f} vs {cart:,.0f} env-steps per CPU s (rollouts and "
+               "updates)", ">= 0.8x", haptic / cart >= 0.8)
 
 
 def state_bytes_per_env(env_id: str, n: int) -> float:
