@@ -18,6 +18,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.stats import ks_2samp
@@ -27,17 +28,17 @@ from softenv._artifact import write_text
 from softenv.envs import HAPTIC_SCENES
 
 
-def compare(scene: str, name: str, episodes: int, engine: str) -> dict[str, dict[str, float]]:
+def compare(scene: str, name: str, episodes: int, engine: str) -> dict[str, dict[str, float | None]]:
     """Per metric: episodes equal bit for bit, the largest |difference| and the KS p-value."""
     batch = baseline_job(name, scene, episodes, device={"batch_engine": engine}).values
     single = baseline_job(name, scene, episodes, "sync").values
-    out = {}
+    out: dict[str, dict[str, float | None]] = {}
     for metric, x in batch.items():
         y = single[metric]
         same = (x == y) | (np.isnan(x) & np.isnan(y))
         finite = ~np.isnan(x) & ~np.isnan(y)
         diff = float(np.max(np.abs(x[finite] - y[finite]))) if finite.any() else 0.0
-        p = float(ks_2samp(x[finite], y[finite]).pvalue) if finite.sum() > 1 else float("nan")
+        p = float(ks_2samp(x[finite], y[finite]).pvalue) if finite.sum() > 1 else None
         out[metric] = {"equal": int(same.sum()), "max_diff": diff, "ks_p": p}
     return out
 
@@ -50,7 +51,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results"))
     args = parser.parse_args()
     start = time.time()
-    table: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
+    table: dict[str, dict[str, dict[str, dict[str, Any]]]] = {}
     for scene in HAPTIC_SCENES:
         for name in args.policies:
             table.setdefault(scene, {})[name] = compare(scene, name, args.episodes, args.engine)
@@ -61,12 +62,17 @@ def main() -> None:
              "each policy on each haptic scene, on the batched twin and on as many single (pymunk) envs. "
              "Per metric: episodes equal bit for bit, the largest difference, and the two-sample "
              "Kolmogorov-Smirnov p-value of the two distributions.", "",
-             "| scene | policy | metric | equal episodes | largest difference | KS p-value |", "|---|---|---|---|---|---|"]
+             "| scene | policy | metrics | equal episodes (fewest of any metric) | largest difference | smallest KS p-value |",
+             "|---|---|---|---|---|---|"]
     for scene, policies in table.items():
         for name, metrics in policies.items():
-            for metric, r in metrics.items():
-                lines.append(f"| {scene} | {name} | {metric} | {r['equal']} / {args.episodes} | {r['max_diff']:.3g} | "
-                             f"{r['ks_p']:.3g} |")
+            equal = min(r["equal"] for r in metrics.values())
+            diff = max(r["max_diff"] for r in metrics.values())
+            p = min(r["ks_p"] for r in metrics.values() if r["ks_p"] is not None)
+            lines.append(f"| {scene} | {name} | {len(metrics)} | {equal} / {args.episodes} | {diff:.3g} | {p:.3g} |")
+    lines += ["", "Metrics: " + ", ".join(next(iter(next(iter(table.values())).values()))) + ". Per metric in "
+              "`engine_agreement.json`. A KS p-value is left out where a metric has fewer than two finite values "
+              "(steps to success where no episode succeeded)."]
     write_text(args.out / "engine_agreement.md", "\n".join(lines) + "\n")
     write_text(args.out / "engine_agreement.json", json.dumps({"command": command, "engine": args.engine,
                                                                "episodes": args.episodes, "table": table}, indent=1))
