@@ -227,13 +227,16 @@ def test_rgb_array_shows_the_blade_beside_the_sphere_and_human_mode_draws_headle
 
 
 def test_haptic_scene_imports_pymunk_but_neither_matplotlib_nor_torch(heavy_modules_after):
-    code = ("import gymnasium as gym\n"
-            "env = gym.make('softenv:SoftSphereHaptic-v0')\n"
-            "env.reset(seed=0)\n"
-            "for _ in range(5): env.step(env.action_space.sample())\n"
-            "venv = gym.make_vec('softenv:SoftSphereHaptic-v0', num_envs=2, vectorization_mode='vector_entry_point')\n"
-            "venv.reset(seed=0); venv.step(venv.action_space.sample())\n")
-    assert heavy_modules_after(code) == ["pymunk"]
+    """The single env loads pymunk alone; its batched twin numba too (its compiled engine), which loads
+    scipy (its version check, and scipy.linalg's LAPACK bindings when it compiles)."""
+    single = ("import gymnasium as gym\n"
+              "env = gym.make('softenv:SoftSphereHaptic-v0')\n"
+              "env.reset(seed=0)\n"
+              "for _ in range(5): env.step(env.action_space.sample())\n")
+    assert heavy_modules_after(single) == ["pymunk"]
+    batch = single + ("venv = gym.make_vec('softenv:SoftSphereHaptic-v0', num_envs=2, vectorization_mode='vector_entry_point')\n"
+                      "venv.reset(seed=0); venv.step(venv.action_space.sample())\n")
+    assert heavy_modules_after(batch) == ["numba", "pymunk", "scipy"]
 
 
 def test_sb3_adapter_serves_the_haptic_twin():

@@ -11,9 +11,10 @@ A package split by job; only the modules marked pymunk import it:
 * :mod:`.batch` -- ``n`` devices on arrays: with ``pymunk.batch`` or with :mod:`.rigid` (pymunk).
 * :mod:`.kernel` -- ``n`` devices in one compiled loop (numba): the batch's default engine.
 * :mod:`.part` -- the env-facing parts (the device contract of :mod:`softenv.devices.base`): workspace
-  clip, the incisor reward term, info keys, the clinical record (pymunk).
+  clip, the incisor reward term, info keys, the clinical record (pymunk); :mod:`.part_batch` the
+  batch's, on the engine ``device.batch_engine`` names (pymunk, numba).
 
-This module holds the kind (:data:`LARYNGOSCOPE`) and the observation's names and scales, so readers
+This module holds the kind, the batch engines' names (:data:`LARYNGOSCOPE`) and the observation's names and scales, so readers
 of the observation (:mod:`softenv.control`, the baselines) load without pymunk.
 """
 
@@ -41,7 +42,7 @@ def _single(scene: DeviceScene, config: Config) -> Any:
 
 
 def _batch(scene: DeviceScene, config: Config, n: int) -> Any:
-    from .part import LaryngoscopePartBatch      # pymunk: only for scenes with the laryngoscope
+    from .part_batch import LaryngoscopePartBatch    # pymunk and numba: only for batches of laryngoscopes
 
     return LaryngoscopePartBatch(scene, config, n)
 

@@ -1,6 +1,7 @@
 """The laryngoscope as a part an env composes (the contract of :mod:`softenv.devices.base`), for one
-device and for a batch: the contact's force features clipped to the scene's workspace, the incisor
-reward term, the info keys, and the clinical record of each episode (:mod:`softenv.clinical`)."""
+device (the batch's part is :mod:`.part_batch`): the contact's force features clipped to the scene's
+workspace, the incisor reward term, the info keys, and the clinical record of each episode
+(:mod:`softenv.clinical`)."""
 
 from __future__ import annotations
 
@@ -12,17 +13,12 @@ from ... import clinical
 from ..base import Config, DeviceScene
 from ..contact import TongueContact
 from . import LARYNGOSCOPE_OBS
-from .batch import ArrayLaryngoscopes, LaryngoscopeArrays, LaryngoscopeBatch
-from .kernel import LaryngoscopeKernel
 from .params import LaryngoscopeParams
 from .single import Laryngoscope
 from .space import DeviceState
 
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")
-# device.batch_engine -> the batch it builds
-ENGINES: dict[str, type[ArrayLaryngoscopes]] = {"compiled": LaryngoscopeKernel, "numpy": LaryngoscopeArrays,
-                                                "pymunk": LaryngoscopeBatch}
 
 
 def laryngoscope_parts(scene: DeviceScene, config: Config) -> tuple[LaryngoscopeParams, TongueContact]:
@@ -131,77 +127,3 @@ class LaryngoscopePart(PickledByState):
 
     def _rebuilt(self, state: DeviceState) -> Laryngoscope:
         return Laryngoscope(*laryngoscope_parts(self._scene, self._config))
-
-
-class LaryngoscopePartBatch(PickledByState):
-    """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`) on the engine
-    ``device.batch_engine`` names (:data:`ENGINES`): ``compiled`` (:class:`~.kernel.LaryngoscopeKernel`,
-    the default) and ``numpy`` (:class:`~.batch.LaryngoscopeArrays`) equal single devices bit for bit;
-    ``pymunk`` (:class:`~.batch.LaryngoscopeBatch`, one space) does for device 0, the others agree to
-    rounding (each sits at its own place in the space)."""
-
-    obs_names = LARYNGOSCOPE_OBS
-    info_keys = INFO_KEYS
-    episode_info_keys = ("clinical",)
-    physics_name = "laryngoscopes"
-
-    def __init__(self, scene: DeviceScene, config: Config, n: int) -> None:
-        self._scene, self._config = scene, config
-        self.laryngoscopes = self._rebuilt_for(n)
-        self._start_state = self.laryngoscopes.start_state(n)
-        self._workspace = scene.workspace
-        self._rest = scene.rest_features
-        self._weights = dict(config["reward"])
-        self.clinical = clinical.ClinicalRecorder(n, config["dynamics"]["dt"], config["task"]["horizon"])
-
-    def _clinical_values(self) -> np.ndarray:
-        return np.stack(np.broadcast_arrays(*self.laryngoscopes.clinical_values()), axis=1)
-
-    def reset(self, mask: np.ndarray) -> np.ndarray:
-        self.laryngoscopes.load_state(self._start_state, rows=mask)
-        self.clinical.start(mask, self._clinical_values()[mask])
-        return np.zeros(4)
-
-    def act(self, actions: np.ndarray, stepped: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        dev, box = self.laryngoscopes, self._workspace
-        dev.control_step(actions, moving=stepped)
-        features, touching = dev.features()
-        clipped = np.minimum(np.maximum(features, box.low), box.high)
-        return np.where(touching[:, None], clipped, self._rest), dev.normal_force, dev.sideways_force
-
-    def observation(self, features: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        obs = self.laryngoscopes.observation()
-        return obs if mask is None else obs[mask]
-
-    def report(self, info: dict[str, Any], stepped: np.ndarray) -> np.ndarray:
-        dev = self.laryngoscopes
-        incisor = dev.incisor_force
-        term = incisor_term(incisor, self._weights)
-        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force, "incisor_force_N": incisor,
-                     "haptic_force_N": dev.haptic_force(), "blade_pose": dev.blade_pose()})
-        rows = np.flatnonzero(stepped)
-        self.clinical.record(rows, self._clinical_values()[rows])
-        return term
-
-    def clinical_summary(self, i: int, b: np.ndarray) -> dict[str, float]:
-        """Device ``i``'s episode so far (see :meth:`LaryngoscopePart.clinical_summary`)."""
-        return self.clinical.summary(i, glottic_view(self._scene, b))
-
-    def episode_info(self, i: int, b: np.ndarray) -> dict[str, Any]:
-        return {"clinical": self.clinical_summary(i, b)}
-
-    def drawing(self, i: int) -> dict[str, Any]:
-        return self.laryngoscopes.drawing()[i]
-
-    def state(self) -> Any:
-        return self.laryngoscopes.state()
-
-    def load_state(self, state: Any) -> None:
-        self.laryngoscopes.load_state(state)
-
-    def _rebuilt_for(self, n: int) -> ArrayLaryngoscopes:
-        engine = ENGINES[self._config["device"]["batch_engine"]]
-        return engine(*laryngoscope_parts(self._scene, self._config), n)
-
-    def _rebuilt(self, state: DeviceState) -> ArrayLaryngoscopes:
-        return self._rebuilt_for(len(state.blade))
