@@ -3,12 +3,17 @@
 compiled from its own source.
 
 numpy spends a substep of :class:`~.batch.LaryngoscopeArrays` in some five hundred calls on short
-arrays, so its speed is set by the count of calls, not by the batch: a loop over devices, each
-running its whole period (20 substeps) in registers, is what reaches hundreds of thousands of
-env-steps a second on one core. The loop runs Chipmunk's expressions as :func:`~.rigid.coupling_step`
-and :mod:`.incisors` write them, the same IEEE operations in the same order (no fast-math, no fused
+arrays, so its speed is set by the count of calls, not by the batch; a loop over the devices, each
+running its whole period (some 20 substeps) in registers, is ten times faster (figures in
+``docs/laryngoscope.md``). The loop runs Chipmunk's expressions as :func:`~.rigid.coupling_step` and
+:mod:`.incisors` write them, the same IEEE operations in the same order (no fast-math, no fused
 multiply-add), and ``tests/test_laryngoscope_arrays.py`` holds every device of
-:class:`~.batch.LaryngoscopeKernel` to a single pymunk device bit for bit.
+:class:`LaryngoscopeKernel` to a single pymunk device bit for bit. Where a blade without contact lies
+clear of the incisors, the collision is skipped (:func:`_separated`).
+
+numba compiles on the first call in a process (10-16 s on a 2-core VM), without a disk cache: numba's
+cache tracks the source file of the function it caches, not those of the functions it calls
+(:func:`~.physics.tongue_substep_floats`), so a cached kernel could outlive a change to them.
 
 No contact state crosses a control period (:mod:`.space`): each device's arbiter with the incisors
 and its bias velocity start empty at every call, so the kernel keeps them in local variables.
@@ -43,6 +48,7 @@ def substep_tuple(c: Constants) -> tuple[Any, ...]:
 
 
 def coupling_tuple(c: Coupling) -> tuple[float, ...]:
+    """:class:`~.rigid.Coupling` as the kernel reads it."""
     return (c.m_inv, c.i_inv, c.grip[0], c.grip[1], c.k, c.c, c.k_rot, c.c_rot)
 
 
