@@ -193,10 +193,10 @@ def ppo_row(quick: bool, n: int = 8) -> Row:
     """stable-baselines3's PPO (its defaults) training on SoftSphereHaptic-v0 through the adapter over
     the batched twin, against PPO on CartPole-v1 in SB3's ``DummyVecEnv``, both with ``n`` envs; CPU
     time per environment step over whole ``learn`` calls (rollouts and updates), repeats interleaved."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3 import PPO                              # the rl extra: only for this row
+    from stable_baselines3.common.env_util import make_vec_env     # the rl extra
 
-    from ..envs.sb3 import SoftSphereSB3VecEnv
+    from ..envs.sb3 import SoftSphereSB3VecEnv                      # stable-baselines3
 
     steps = 4096 if quick else 16384
     models = {"haptic": PPO("MlpPolicy", SoftSphereSB3VecEnv(n, "SoftSphereHaptic-v0"), n_steps=steps // n, seed=0),
