@@ -189,7 +189,7 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
         gx, gy, pitch = hand[i, 0], hand[i, 1], hand[i, 2]
         lat_y, lat_v, hand_lat, anchor = lateral[i, 0], lateral[i, 1], lateral[i, 2], lateral[i, 3]
         vX, vY, spin, v_lat = command[0, i], command[1, i], command[2, i], command[3, i]
-        alive, ticks, has_normal, anx, any_ = False, 0, False, 0.0, 0.0
+        alive, ticks, anx, any_ = False, 0, 0.0, 0.0
         ex[:] = False
         bvx = bvy = bw = 0.0
         impulse = 0.0
@@ -229,23 +229,22 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
                 first = touching and not (alive and ticks == 0)
                 ticks = 0 if touching else ticks + 1
                 alive = touching or (alive and ticks < PERSISTENCE)
-                if touching:
+                if touching:                    # the arbiter's normal and pre-step: read only while touching
                     ex[:], feat[:, :], jn[:], jt[:] = ex_new, feat_new, jn_new, jt_new
-                if touching or not has_normal:
-                    anx, any_, has_normal = nnx, nny, True
-                for s in range(2):
-                    r1x, r1y = points[s, 0] - 0.0, points[s, 1] - 0.0
-                    r2x[s], r2y[s] = points[s, 2] - px, points[s, 3] - py
-                    rcn = r2x[s] * any_ - r2y[s] * anx
-                    n_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rcn * rcn))
-                    rct = r2x[s] * anx - r2y[s] * -any_
-                    t_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rct * rct))
-                    dist = ((r2x[s] - r1x) + px) * anx + ((r2y[s] - r1y) + py) * any_
-                    low = dist + slop
-                    bias[s] = -bias_coef * (0.0 if 0.0 < low else low) / h
-                    j_bias[s] = 0.0
-                    # incisors.bounce_velocity
-                    bounce[s] = ((vx + -r2y[s] * w) * anx + (vy + r2x[s] * w) * any_) * (0.0 * 0.0)
+                    anx, any_ = nnx, nny
+                    for s in range(2):
+                        r1x, r1y = points[s, 0] - 0.0, points[s, 1] - 0.0
+                        r2x[s], r2y[s] = points[s, 2] - px, points[s, 3] - py
+                        rcn = r2x[s] * any_ - r2y[s] * anx
+                        n_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rcn * rcn))
+                        rct = r2x[s] * anx - r2y[s] * -any_
+                        t_mass[s] = 1.0 / (0.0 + (m_inv + i_inv * rct * rct))
+                        dist = ((r2x[s] - r1x) + px) * anx + ((r2y[s] - r1y) + py) * any_
+                        low = dist + slop
+                        bias[s] = -bias_coef * (0.0 if 0.0 < low else low) / h
+                        j_bias[s] = 0.0
+                        # incisors.bounce_velocity
+                        bounce[s] = ((vx + -r2y[s] * w) * anx + (vy + r2x[s] * w) * any_) * (0.0 * 0.0)
             # 2. the springs' explicit impulses
             gqx, gqy = ca * qx + -sa * qy, sa * qx + ca * qy
             for s in range(2):
