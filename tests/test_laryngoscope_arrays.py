@@ -16,7 +16,7 @@ from pymunk._chipmunk import lib
 from softenv._ops import ArrayOps, ScalarOps
 from softenv.devices.laryngoscope.batch import LaryngoscopeArrays
 from softenv.devices.laryngoscope.kernel import LaryngoscopeKernel
-from softenv.devices.laryngoscope.incisors import Arbiters, Solver, collide, polygon_planes, transformed
+from softenv.devices.laryngoscope.incisors import Arbiters, Solver, collide, transformed
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.devices.laryngoscope.rigid import Coupling, Incisors, coupling_step
@@ -109,11 +109,11 @@ def test_the_blade_meets_the_incisors_where_chipmunk_finds_it_bit_for_bit():
             normal[k] = found.normal.x, found.normal.y
             on_segment[k], on_blade[k] = (point.pointA.x, point.pointA.y), (point.pointB.x, point.pointB.y)
             deep[k] |= point.distance <= -INCISOR_RADIUS
-    local, local_normals = polygon_planes(p.outline)
+    solver = Solver.of(p.incisor_segment, INCISOR_RADIUS, p.outline, 1.0, 1.0, 0.0, 1.0, 0.0, 0.0)
     keep = ~deep
     c, s = np.cos(a[keep]), np.sin(a[keep])
-    mine = collide(p.incisor_segment, INCISOR_RADIUS, transformed(local, x[keep], y[keep], c, s),
-                   transformed(local_normals, x[keep], y[keep], c, s, offset=False))
+    mine = collide(solver, transformed(solver.local, x[keep], y[keep], c, s),
+                   transformed(solver.local_normals, x[keep], y[keep], c, s, offset=False), np)
     exists = mine[3]
     assert np.array_equal(exists.sum(axis=1), count[keep])
     touching = count[keep] > 0
@@ -134,10 +134,9 @@ def test_the_blade_levered_on_the_incisors_steps_as_pymunk_steps_it_bit_for_bit(
     p = LaryngoscopeParams.from_config(haptic_config(None))
     c, n = Coupling.of(p), 8
     devices = [pymunk_device(p, threaded=False, teeth=True) for _ in range(n)]
-    local, local_normals = polygon_planes(p.outline)
-    solver = Solver(p.incisor_segment, INCISOR_RADIUS, local, local_normals, c.m_inv, c.i_inv,
-                    SHAPE_FRICTION * SHAPE_FRICTION, H, COLLISION_SLOP, 1.0 - math.pow(devices[0][0].collision_bias, H))
-    teeth = Incisors(solver, Arbiters.none(n), [np.zeros(n), np.zeros(n), np.zeros(n)], dt_coef=0.0)
+    solver = Solver.of(p.incisor_segment, INCISOR_RADIUS, p.outline, c.m_inv, c.i_inv, SHAPE_FRICTION * SHAPE_FRICTION,
+                       H, COLLISION_SLOP, 1.0 - math.pow(devices[0][0].collision_bias, H))
+    teeth = Incisors(solver, Arbiters.none(n), [np.zeros(n), np.zeros(n), np.zeros(n)], np, dt_coef=0.0)
     blade = tuple(np.full(n, v) for v in (*p.body_start, 0.0, 0.0, 0.0, 0.0))
     hand = tuple(np.full(n, v) for v in (*p.grip_start, 0.0))
     rng = np.random.default_rng(0)

@@ -275,6 +275,13 @@ def bench_torch(quick: bool, reference: Timing) -> list[Row]:
             rows.append(Row("torch", f"SoftSphere-v0: torch twin on cpu, {str(dtype)[6:]}, {draw} draw"
                             f"{_compiled_label(mode)}, {n} envs", rate, "env-steps/s",
                             f"{rate / numpy_rate:.2f}x the numpy twin"))
+    n = 1024
+    compiled = n / twin_step_timing(HAPTIC_ID, n, 2 if quick else 6, autoreset_mode="same_step").median
+    rows.append(Row("torch", f"{HAPTIC_ID}: numpy twin (compiled engine), {n} envs", compiled, "env-steps/s"))
+    rate = n / torch_step_timing(n, "cpu", torch.float32, "device", None, 1 if quick else 3, env_id=HAPTIC_ID,
+                                 warmup=1).median
+    rows.append(Row("torch", f"{HAPTIC_ID}: torch twin on cpu, float32 env, float64 device, device draw, {n} envs",
+                    rate, "env-steps/s", f"{rate / compiled:.2f}x the numpy twin"))
     if not torch.cuda.is_available():
         rows.append(Row("torch", "SoftSphere-v0: torch twin on a GPU", float("nan"), "",
                         "not measured: no CUDA device in this process", ok=None))
@@ -334,12 +341,59 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
                 continue
             rows.append(Row("gpu", label, rate, "env-steps/s", f"{rate / numpy_rate:.1f}x the numpy twin",
                             f">= {target / 1e6:.0f}M" if target else "", rate >= target if target else None))
+    return rows + haptic_tensor_rows(device, name, HAPTIC_GPU_SIZES if device == "cuda" else (64,), 3)
+
+
+HAPTIC_ID = "SoftSphereHaptic-v0"
+HAPTIC_GPU_SIZES = (1024, 65_536, 1_048_576, 4_194_304)
+HAPTIC_GPU_TARGET = 50e6         # issue 37: env-steps/s at the best batch size
+
+
+def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
+    """The laryngoscope's torch twin (float32 env, float64 device physics, device draw, same-step autoreset,
+    no action check), eager, on ``device`` over batch sizes; on CUDA, first a check that its steps never
+    synchronise with the host. The best size is held to the issue's target."""
+    import torch                                            # torch: the rl extra
+
+    rows = []
+    if device == "cuda":
+        env = _torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID)
+        action = torch.zeros((1024, 4), device=device)
+        torch.cuda.synchronize()
+        torch.cuda.set_sync_debug_mode("error")
+        try:
+            for _ in range(3):
+                env.step(action)
+            synced = ""
+        except RuntimeError as exc:
+            synced = str(exc).splitlines()[0]
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+        rows.append(Row("gpu", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
+                        synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
+    rates = []
+    for n in sizes:
+        label = f"{HAPTIC_ID}: torch twin on {name}, float32 env, float64 device, device draw, {n:,} envs"
+        try:
+            rate = n / torch_step_timing(n, device, torch.float32, "device", None, calls, env_id=HAPTIC_ID,
+                                         warmup=2).median
+        except Exception as exc:           # out of memory at the largest size: report it, go on
+            message = " ".join(str(exc).split())
+            rows.append(Row("gpu", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200], ok=False))
+            continue
+        rates.append(rate)
+        rows.append(Row("gpu", label, rate, "env-steps/s"))
+    if device == "cuda" and rates:
+        best = max(rates)
+        rows.append(Row("gpu", f"{HAPTIC_ID}: torch twin on {name}, best batch size", best, "env-steps/s",
+                        "eager (the step is not captured: see docs/laryngoscope.md)",
+                        f">= {HAPTIC_GPU_TARGET / 1e6:.0f}M", best >= HAPTIC_GPU_TARGET))
     return rows
 
 
 def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int,
-                      cuda_graph: bool = False) -> Timing:
-    """Seconds per step of the torch twin of SoftSphere-v0 (5 repeats of ``calls`` steps, the device
+                      cuda_graph: bool = False, env_id: str = "SoftSphere-v0", warmup: int | None = None) -> Timing:
+    """Seconds per step of the torch twin of ``env_id`` (5 repeats of ``calls`` steps, the device
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
     ``"reduce-overhead"``, and any timing with ``cuda_graph``, go through the env itself: its ``compile_options``
     and ``cuda_graph``)."""
@@ -353,11 +407,11 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
         # CUDA graphs: the env compiles (compile_options) or records (cuda_graph) its own step. Compiling
         # env.step whole would make the host's step count an int input, and CUDA graphs record a new graph
         # for each of its values.
-        env = _torch_twin(n, device, dtype, draw, compile_options=None if mode is None else {"mode": mode},
-                          cuda_graph=cuda_graph)
+        env = _torch_twin(n, device, dtype, draw, env_id=env_id,
+                          compile_options=None if mode is None else {"mode": mode}, cuda_graph=cuda_graph)
         step = env.step
     else:
-        env = _torch_twin(n, device, dtype, draw)
+        env = _torch_twin(n, device, dtype, draw, env_id=env_id)
         step = env.step if mode is None else torch.compile(env.step, fullgraph=True, mode=mode)
     generator = torch.Generator(device=device).manual_seed(0)
     actions = [torch.rand((n, 4), generator=generator, device=device, dtype=dtype) * 2 - 1 for _ in range(16)]
@@ -366,7 +420,8 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
     strict = (torch._inductor.config.patch({"triton.cudagraph_or_error": True}) if mode == "reduce-overhead"
               else contextlib.nullcontext())
     with strict:
-        for i in range(env.unwrapped.world.horizon + 2):   # past the first episode starts: every graph compiled
+        # past the first episode starts: every graph compiled (an eager step needs ``warmup`` steps only)
+        for i in range(env.unwrapped.world.horizon + 2 if warmup is None else warmup):
             step(actions[i % len(actions)])
     samples = []
     for _ in range(5):
@@ -387,8 +442,8 @@ def _compiled_label(mode: str | None, cuda_graph: bool = False) -> str:
     return "" if mode is None else (", torch.compile" if mode == "default" else f", torch.compile {mode}")
 
 
-def _torch_twin(n: int, device: str, dtype: Any, draw: str, **kwargs: Any) -> Any:
-    env = gym.make_vec("SoftSphere-v0", num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
+def _torch_twin(n: int, device: str, dtype: Any, draw: str, env_id: str = "SoftSphere-v0", **kwargs: Any) -> Any:
+    env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
                        torch_device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
                        **kwargs)
     env.reset(seed=0)

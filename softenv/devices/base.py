@@ -155,15 +155,41 @@ class DeviceBatch(DeviceNames, Protocol):
         ...
 
 
+@runtime_checkable
+class DeviceTensors(DeviceNames, Protocol):
+    """``n`` devices on torch tensors of one torch device (the torch twin,
+    :class:`softenv.envs.torch_twin.SoftSphereTorchVectorEnv`): :class:`DeviceBatch`'s step on tensors,
+    with no read back to the host, so that a GPU step never waits for it."""
+
+    def reset(self, mask: Any) -> Any:
+        """Put the masked devices at rest; returns the previous action their episodes start with
+        (a tensor broadcastable to ``(n, 4)``)."""
+        ...
+
+    def act(self, actions: Any, stepped: Any) -> tuple[Any, Any, Any]:
+        """As :meth:`DeviceBatch.act`, on tensors in the env's dtype."""
+        ...
+
+    def observation(self, features: Any) -> Any:
+        """Observation slices ``(n, m)`` of every device."""
+        ...
+
+    def report(self, info: dict[str, Any], stepped: Any) -> Any:
+        """As :meth:`DeviceBatch.report` (tensors); records nothing for the episode's end."""
+        ...
+
+
 @dataclass(frozen=True)
 class DeviceKind:
     """A kind of device: what ``device.kind`` names. ``single(scene, config)`` and ``batch(scene, config,
-    n)`` build it; ``obs_names`` are known without building it (observation spaces, controllers)."""
+    n)`` build it, and, for a kind the torch twin can step, ``tensors(scene, config, n, torch_device,
+    dtype)``; ``obs_names`` are known without building it (observation spaces, controllers)."""
 
     name: str
     obs_names: tuple[str, ...]
     single: Callable[[DeviceScene, Config], Device]
     batch: Callable[[DeviceScene, Config, int], DeviceBatch]
+    tensors: Callable[[DeviceScene, Config, int, Any, Any], DeviceTensors] | None = None
 
 
 # the built-in kinds, as entry points: a kind's module loads when a scene names it (pymunk stays out otherwise)

@@ -120,4 +120,10 @@ class IdealDeviceBatch:
         pass
 
 
-IDEAL = DeviceKind("ideal", IDEAL_OBS, IdealDevice, IdealDeviceBatch)
+def _tensors(scene: DeviceScene, config: Config, n: int, torch_device: Any, dtype: Any) -> Any:
+    from .ideal_tensors import IdealDeviceTensors           # torch: only for the torch twin
+
+    return IdealDeviceTensors(scene, config, n, torch_device, dtype)
+
+
+IDEAL = DeviceKind("ideal", IDEAL_OBS, IdealDevice, IdealDeviceBatch, _tensors)

@@ -22,29 +22,12 @@ from typing import Any, Callable
 import numpy as np
 import torch
 
+from .._torch_ops import TorchOps
 from .batching import check_seeds, seeded_episodes, target_option
 from .task import procedure_features
 from .world import World
 
 Lookup = Callable[[torch.Tensor], torch.Tensor]
-
-
-class TorchOps:
-    """The elementwise operations of :mod:`softenv.envs.task`, on tensors."""
-
-    sqrt = staticmethod(torch.sqrt)
-
-    @staticmethod
-    def positive(x: torch.Tensor) -> torch.Tensor:
-        return torch.clamp(x, min=0.0)
-
-    @staticmethod
-    def clip(x: torch.Tensor, low: float, high: float) -> torch.Tensor:
-        return torch.clamp(x, low, high)
-
-    @staticmethod
-    def stack(columns: list[torch.Tensor]) -> torch.Tensor:
-        return torch.stack(columns, dim=-1)
 
 
 # -- splitmix64 on int64 tensors (two's-complement wrap-around, as torch's integer ops do) ----------

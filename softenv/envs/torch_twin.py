@@ -42,7 +42,8 @@ from .batching import check_actions, episode_limit
 from .config import scene_config
 from .task import reward_terms
 from .torch_graph import GraphedStep
-from .torch_parts import DeviceEpisodes, HostEpisodes, TorchOps, keep, sum_dtype
+from .._torch_ops import TorchOps
+from .torch_parts import DeviceEpisodes, HostEpisodes, keep, sum_dtype
 from .world import World
 
 _GRAPH_MODES = ("reduce-overhead", "max-autotune")     # torch.compile modes that record CUDA graphs themselves
@@ -98,10 +99,13 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
         world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
         self.max_episode_steps = episode_limit(max_episode_steps, world.horizon)
-        if world.device_kind.name != "ideal":
-            raise ValueError(f"device.kind={world.config['device']['kind']!r}: the torch backend covers "
-                             "device.kind='ideal' only (other devices step on Python floats or numpy: pymunk has "
-                             "no tensors); use backend='numpy'")
+        kind = world.device_kind
+        if kind.tensors is None:
+            raise ValueError(f"device.kind={world.config['device']['kind']!r} has no tensor form (its DeviceKind's "
+                             "tensors is None): the torch backend steps 'ideal' and 'laryngoscope'; use backend='numpy'")
+        if kind.name != "ideal" and (compile_options is not None or cuda_graph):
+            raise ValueError(f"compile_options={compile_options!r}, cuda_graph={cuda_graph!r}: capturing the step "
+                             f"covers device.kind='ideal'; the {kind.name!r} device steps eagerly (leave both unset)")
         table = world.scene.response
         if not isinstance(table, TabulatedResponse):
             raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
@@ -115,8 +119,6 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         t = self._tensor
-        box = world.force_box
-        self._mid, self._half = t(box.mid), t(box.half)
         self._low, self._inv_step = t(table.low_), t(table.inv_step_)
         grid = table.grid()
         self._flat = t(grid.flat)
@@ -124,9 +126,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._bits = torch.as_tensor(grid.bits, device=self.torch_device)
         self._offsets = list(grid.offsets)           # the corners' row offsets: constants of the step
         self._inv_sqrt, self._sqrt_var, self._b_rest = t(world.inv_sqrt), t(world.sqrt_variance), t(world.b_rest)
-        self._rest_action = t(box.rest_action.astype(np.float64))
         self._rest_features = t(world.scene.rest_features)
         n, k = self.num_envs, world.k
+        self._device = kind.tensors(world.scene, world.config, n, self.torch_device, dtype)
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
@@ -162,7 +164,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.torch_device)
         self._start(everyone)
         self._autoreset[:] = False
-        return self._observe(self._b, self._episodes.first(), self._features, self._prev), {}
+        return self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev), {}
 
     def step(self, actions: Any) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
         if not self._started:
@@ -235,7 +237,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         """The numpy twin's ``_advance`` (the stepped envs commit their state) on tensors."""
         w = self.world
         target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
-        f = self._mid + a * self._half
+        f, normal, sideways = self._device.act(a, stepped)
         g = self._response(f)
         z = self._z.clone() if w.dynamics.stateful else self._z     # step advances the creep state in place
         b = w.dynamics.step(z, g)
@@ -243,7 +245,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         sq = torch.sum(d * d, dim=-1)
         c = a - self._prev
         change = torch.sum(c * c, dim=-1)
-        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, f[:, 2], f[:, 3],
+        reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways,
                                                                        change, w.weights, TorchOps)
         agent_cum = self._agent_cum + ratio.to(torch.float64)
         peak = torch.maximum(self._peak, force)
@@ -264,14 +266,17 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         values = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,
                   "shape_error_mm": torch.sqrt(sq / w.n_vertices) * 1e3, "force_N": force, "peak_force_N": peak,
                   "is_success": success, "normalized_score": score}
+        extra = self._device.report(values, s)
+        reward = reward + extra
         upcoming = self._episodes.upcoming(self._t)      # (the device source moves its target here)
+        device_obs = self._device_obs()
         if w.obs_mode == "dict":
-            obs = self._observe(self._b, self._last_target, self._features, self._prev)
+            obs = self._observe(self._b, self._last_target, device_obs, self._prev)
             shape = self._goal_shape_term(obs["achieved_goal"], obs["desired_goal"])
-            reward = shape + (force_term + smooth)
+            reward = shape + (force_term + smooth + extra)
             values["reward_shape"] = shape
         else:
-            obs = self._observe(self._b, upcoming, self._features, self._prev)
+            obs = self._observe(self._b, upcoming, device_obs, self._prev)
         return obs, torch.where(s, reward, torch.zeros_like(reward)), terminated, truncated, values
 
     def _goal_shape_term(self, achieved: torch.Tensor, desired: torch.Tensor) -> torch.Tensor:
@@ -283,10 +288,12 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         sq_ref = torch.clamp(torch.sum(r * r, dim=-1), min=self.world.floor_sq)
         return -self.world.weights["shape_weight"] * torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref)
 
-    def _observe(self, b: torch.Tensor, target: torch.Tensor, features: torch.Tensor, prev: torch.Tensor) -> Any:
+    def _device_obs(self) -> torch.Tensor:
+        return self._device.observation(self._features)
+
+    def _observe(self, b: torch.Tensor, target: torch.Tensor, device_obs: torch.Tensor, prev: torch.Tensor) -> Any:
         k = self.world.k
-        obs = torch.cat([b * self._inv_sqrt, target * self._inv_sqrt, (features - self._mid) / self._half, prev],
-                        dim=-1).to(torch.float32)
+        obs = torch.cat([b * self._inv_sqrt, target * self._inv_sqrt, device_obs, prev], dim=-1).to(torch.float32)
         if self.world.obs_mode == "dict":
             return {"observation": obs[:, 2 * k:].clone(), "achieved_goal": obs[:, :k].clone(),
                     "desired_goal": obs[:, k:2 * k].clone()}
@@ -299,7 +306,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         keep(rows, self._b_rest, self._z)
         keep(rows, self._b_rest, self._b)
         keep(rows, self._rest_features, self._features)
-        keep(rows, self._rest_action, self._prev)
+        keep(rows, self._device.reset(mask), self._prev)
         keep(mask, torch.zeros_like(self._t), self._t)
         keep(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
         keep(mask, torch.zeros_like(self._peak), self._peak)
@@ -319,7 +326,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not may_start or not self._episodes.restart(mask):
             return obs
         self._start(mask)
-        fresh = self._observe(self._b, self._episodes.first(), self._features, self._prev)
+        fresh = self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev)
         if isinstance(obs, dict):
             return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
         return torch.where(mask[:, None], fresh, obs)
@@ -342,5 +349,6 @@ def _add_masked(infos: dict[str, Any], values: dict[str, torch.Tensor], mask: to
     """Infos as the numpy twin makes them (zeros where the mask is off, plus ``_key``), on tensors; always
     present (no host branch on the mask)."""
     for key, value in values.items():
-        infos[key] = torch.where(mask, value, torch.zeros((), dtype=value.dtype, device=value.device))
+        rows = mask.reshape(mask.shape + (1,) * (value.dim() - 1))        # (n, 1, ...) for rows of vectors
+        infos[key] = torch.where(rows, value, torch.zeros((), dtype=value.dtype, device=value.device))
         infos[f"_{key}"] = mask.clone()

@@ -10,6 +10,7 @@ A package split by job; only the modules marked pymunk import it:
 * :mod:`.rigid`, :mod:`.incisors` -- the blade, its coupling and the incisors as Chipmunk steps them, on arrays.
 * :mod:`.batch` -- ``n`` devices on arrays: with ``pymunk.batch`` or with :mod:`.rigid` (pymunk).
 * :mod:`.kernel` -- ``n`` devices in one compiled loop (numba): the batch's default engine.
+* :mod:`.tensors` -- ``n`` devices on torch tensors (the numpy array engine's code, torch's operations).
 * :mod:`.part` -- the env-facing parts (the device contract of :mod:`softenv.devices.base`): workspace
   clip, the incisor reward term, info keys, the clinical record (pymunk); :mod:`.part_batch` the
   batch's, on the engine ``device.batch_engine`` names (pymunk, numba).
@@ -47,4 +48,10 @@ def _batch(scene: DeviceScene, config: Config, n: int) -> Any:
     return LaryngoscopePartBatch(scene, config, n)
 
 
-LARYNGOSCOPE = DeviceKind("laryngoscope", LARYNGOSCOPE_OBS, _single, _batch)
+def _tensors(scene: DeviceScene, config: Config, n: int, torch_device: Any, dtype: Any) -> Any:
+    from .tensors import LaryngoscopeTensorPart      # pymunk and torch: only for the torch twin's laryngoscopes
+
+    return LaryngoscopeTensorPart(scene, config, n, torch_device, dtype)
+
+
+LARYNGOSCOPE = DeviceKind("laryngoscope", LARYNGOSCOPE_OBS, _single, _batch, _tensors)

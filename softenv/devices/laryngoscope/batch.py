@@ -11,6 +11,7 @@ with ``ArrayOps``, on one of two engines for the blade, its coupling and the inc
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pymunk
@@ -25,27 +26,33 @@ from .rigid import Coupling, Incisors, coupling_step
 from .space import COLLISION_SLOP, SOLVER_ITERATIONS, DeviceSpace, DeviceState, LaryngoscopeBase
 
 
-Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]       # x, y and angular components, one entry a device
+Vec3 = tuple[Any, Any, Any]       # x, y and angular components, one entry a device
 
 
 class ArrayLaryngoscopes(LaryngoscopeBase):
     """What the two batch engines share: ``n`` devices' state as arrays, the substep loop, the readings.
     An engine supplies :meth:`_bodies`, :meth:`_advance`, :meth:`_flush` and :meth:`_place`."""
 
-    ops = ArrayOps
-    _own = staticmethod(np.copy)
+    ops: Any = ArrayOps
+    xp: Any = np                        # the arrays' namespace (numpy; torch's through array_api_compat)
+    _own: Any = staticmethod(np.copy)
 
-    @staticmethod
-    def _rows(*columns: np.ndarray) -> np.ndarray:
-        return np.stack(columns, axis=-1)
+    def _rows(self, *columns: Any) -> Any:
+        return self.xp.stack(columns, axis=-1)
+
+    def _array(self, value: Any) -> Any:
+        """A host value (numpy) as an array of this batch's namespace."""
+        return np.asarray(value)
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         super().__init__(params, contact, n)
-        self._lateral = np.zeros((n, 4))
-        self._contact = np.zeros((n, 4))
-        self._incisor = np.zeros(n)
-        self._touched = np.zeros(n, dtype=bool)
-        self._hand_v = np.zeros((n, 4))
+        zeros = self._array
+        self._lateral = zeros(np.zeros((n, 4)))
+        self._contact = zeros(np.zeros((n, 4)))
+        self._incisor = zeros(np.zeros(n))
+        self._touched = zeros(np.zeros(n, dtype=bool))
+        self._hand_v = zeros(np.zeros((n, 4)))
+        self._loads, self._slopes = zeros(contact.loads), zeros(contact.slopes)
 
     def _bodies(self) -> np.ndarray:
         """``(n, 2, 6)`` local x, y, angle, vx, vy, spin of every hand (0) and blade (1)."""
@@ -56,8 +63,8 @@ class ArrayLaryngoscopes(LaryngoscopeBase):
         ``blade_v`` under ``force`` (x, y, torque); adds each device's incisor impulse to ``impulse``."""
         raise NotImplementedError
 
-    def _flush(self, rows: np.ndarray) -> None:
-        """Drop the contact state of the devices ``rows`` (indices) that their poses do not show."""
+    def _flush(self, mask: Any) -> None:
+        """Drop the contact state of the masked devices that their poses do not show."""
         raise NotImplementedError
 
     def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
@@ -65,57 +72,58 @@ class ArrayLaryngoscopes(LaryngoscopeBase):
         pitch) rows, the hands at rest, their contact state dropped."""
         raise NotImplementedError
 
-    def control_step(self, actions: np.ndarray, moving: np.ndarray | None = None) -> None:
+    def control_step(self, actions: Any, moving: Any = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
         their hands still (their results are discarded by the caller)."""
         if moving is not None:
-            actions = np.where(moving[:, None], actions, 0.0)
+            actions = self.xp.where(moving[:, None], actions, 0.0)
         bodies = self._bodies()
-        vX, vY, spin, v_lat = hand_command(actions.T, bodies[:, 0, 2], self.params, ArrayOps)
+        vX, vY, spin, v_lat = hand_command(actions.T, bodies[:, 0, 2], self.params, self.ops)
         self.substeps(vX, vY, spin, v_lat, self.n_substeps)
 
-    def substeps(self, vX: np.ndarray, vY: np.ndarray, spin: np.ndarray, v_lat: np.ndarray, count: int) -> None:
-        self._flush(np.flatnonzero(self._touched))
-        self._touched[:] = False
+    def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
+        xp, ops = self.xp, self.ops
+        self._flush(self._touched)
+        self._touched = xp.zeros_like(self._touched)
         c, h = self.c, self.h
         lo, hi = c.low, c.high
-        lat_y, lat_v, hand_lat, anchor = (col.copy() for col in self._lateral.T)
-        impulse = np.zeros(self.n)
-        loads, slopes = self.contact.loads, self.contact.slopes
+        lat_y, lat_v, hand_lat, anchor = (self._own(col) for col in self._lateral.T)
+        impulse = xp.zeros_like(self._incisor)
+        loads, slopes = self._loads, self._slopes
         for _ in range(count):
             bodies = self._bodies()
             gx, gy, pitch = bodies[:, 0, 0], bodies[:, 0, 1], bodies[:, 0, 2]
             px, py, a, vx, vy, w = bodies[:, 1].T
-            hvx = ArrayOps.clip(vX, (lo[0] - gx) / h, (hi[0] - gx) / h)
-            hvy = ArrayOps.clip(vY, (lo[1] - gy) / h, (hi[1] - gy) / h)
-            hw = ArrayOps.clip(spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h)
-            hl = ArrayOps.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
+            hvx = ops.clip(vX, (lo[0] - gx) / h, (hi[0] - gx) / h)
+            hvy = ops.clip(vY, (lo[1] - gy) / h, (hi[1] - gy) / h)
+            hw = ops.clip(spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h)
+            hl = ops.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
             hand_lat = hand_lat + h * hl
-            ca, sa = np.cos(a), np.sin(a)
+            ca, sa = ops.cos(a), ops.sin(a)
             fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
                 (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-                loads, slopes, c, ArrayOps)
+                loads, slopes, c, ops)
             self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
-        self._lateral = np.stack([lat_y, lat_v, hand_lat, anchor], axis=1)
-        self._hand_v = np.stack([hvx, hvy, hw, hl], axis=1)
-        self._contact = np.stack([P, Q, cx, cy], axis=1)
+        self._lateral = xp.stack([lat_y, lat_v, hand_lat, anchor], axis=1)
+        self._hand_v = xp.stack([hvx, hvy, hw, hl], axis=1)
+        self._contact = xp.stack([P, Q, cx, cy], axis=1)
         self._incisor = impulse / (count * h)
         self._forget()
 
-    def features(self) -> tuple[np.ndarray, np.ndarray]:
+    def features(self) -> tuple[Any, Any]:
         """Force features ``(n, 4)`` of the contacts and a mask of the devices in contact."""
         P, Q, cx, cy = self._contact.T
-        feats = np.stack(contact_features(cx, cy, self._lateral[:, 3], P, Q, self.c.R, ArrayOps), axis=1)
+        feats = self.xp.stack(contact_features(cx, cy, self._lateral[:, 3], P, Q, self.c.R, self.ops), axis=1)
         return feats, (P != 0.0) | (Q != 0.0)
 
-    def observation(self) -> np.ndarray:
+    def observation(self) -> Any:
         """``(n, 15)`` device observations (see :meth:`Laryngoscope.observation`)."""
-        return squash(np.stack(self._observation_values(), axis=1))
+        return squash(self.xp.stack(self._observation_values(), axis=1))
 
     def _read_kinematics(self) -> np.ndarray:
         """``(9, n)``: blade x, y, angle, vx, vy, spin and hand x, y, pitch (local frame)."""
         bodies = self._bodies()
-        return np.concatenate([bodies[:, 1].T, bodies[:, 0, :3].T])
+        return self.xp.concat([bodies[:, 1].T, bodies[:, 0, :3].T])
 
     def _lateral_state(self) -> np.ndarray:
         return self._lateral.T
@@ -202,8 +210,8 @@ class LaryngoscopeBatch(ArrayLaryngoscopes):
             impulse[envs] += np.sqrt(j[:, 0] * j[:, 0] + j[:, 1] * j[:, 1])
             self._touched[envs] = True
 
-    def _flush(self, rows: np.ndarray) -> None:
-        self._space.flush(*rows.tolist())
+    def _flush(self, mask: np.ndarray) -> None:
+        self._space.flush(*np.flatnonzero(mask).tolist())
 
     def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
         for i, b, g in zip(rows.tolist(), blade.tolist(), hand.tolist()):
@@ -217,49 +225,51 @@ class LaryngoscopeArrays(ArrayLaryngoscopes):
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         super().__init__(params, contact, n)
-        local, local_normals = incisors.polygon_planes(params.outline)
-        h = self.h
+        h, xp = self.h, self.xp
         bias = math.pow(float(np.float32(1.0) - np.float32(0.1)), 60.0)     # Chipmunk's default: (1 - 0.1f)^60
-        solver = incisors.Solver(params.incisor_segment, INCISOR_RADIUS, local, local_normals, 1.0 / params.mass,
-                                 1.0 / params.moment, SHAPE_FRICTION * SHAPE_FRICTION, h, COLLISION_SLOP,
-                                 1.0 - math.pow(bias, h))
+        solver = incisors.Solver.of(params.incisor_segment, INCISOR_RADIUS, params.outline, 1.0 / params.mass,
+                                    1.0 / params.moment, SHAPE_FRICTION * SHAPE_FRICTION, h, COLLISION_SLOP,
+                                    1.0 - math.pow(bias, h), self._array)
         self._coupling = Coupling.of(params)
-        self._teeth = Incisors(solver, incisors.Arbiters.none(n), [np.zeros(n), np.zeros(n), np.zeros(n)])
-        self._blade = np.zeros((n, 6))
-        self._hand = np.zeros((n, 3))
+        zero = self._array(np.zeros(n))
+        self._teeth = Incisors(solver, incisors.Arbiters.none(n, xp, zero.device), [zero, zero, zero], xp)
+        self._blade = self._array(np.zeros((n, 6)))
+        self._hand = self._array(np.zeros((n, 3)))
         self.load_state(self.start_state(n))
 
-    def _bodies(self) -> np.ndarray:
-        hands = np.concatenate([self._hand, self._hand_v[:, :3]], axis=1)
-        return np.stack([hands, self._blade], axis=1)
+    def _bodies(self) -> Any:
+        xp = self.xp
+        hands = xp.concat([self._hand, self._hand_v[:, :3]], axis=1)
+        return xp.stack([hands, self._blade], axis=1)
 
-    def _advance(self, hand_v: Vec3, blade_v: Vec3, force: Vec3, impulse: np.ndarray) -> None:
+    def _advance(self, hand_v: Vec3, blade_v: Vec3, force: Vec3, impulse: Any) -> None:
+        xp = self.xp
         blade = (*self._blade[:, :3].T, *blade_v)
         moved, hand = coupling_step(blade, tuple(self._hand.T), hand_v, force, self.h, self._coupling,
-                                    SOLVER_ITERATIONS, ArrayOps, self._teeth)
-        self._blade = np.stack(moved, axis=1)
-        self._hand = np.stack(hand, axis=1)
-        self._hand_v[:, :3] = np.stack(hand_v, axis=1)
+                                    SOLVER_ITERATIONS, self.ops, self._teeth)
+        self._blade = xp.stack(moved, axis=1)
+        self._hand = xp.stack(hand, axis=1)
+        self._hand_v[:, :3] = xp.stack(hand_v, axis=1)
         arbiters = self._teeth.arbiters
         touching = arbiters.alive & (arbiters.ticks == 0)
         assert arbiters.normal is not None
-        total = np.zeros((self.n, 2))
+        total = xp.zeros_like(arbiters.normal)
         for slot in range(2):                       # cpArbiterTotalImpulse: the contacts' impulses summed
             on = (touching & arbiters.exists[:, slot])[:, None]
             jx, jy = incisors.rotate(arbiters.normal, arbiters.jn[:, slot], arbiters.jt[:, slot])
-            total = np.where(on, total + np.stack([jx, jy], axis=1), total)
-        impulse += np.where(touching, np.sqrt(total[:, 0] * total[:, 0] + total[:, 1] * total[:, 1]), 0.0)
+            total = xp.where(on, total + xp.stack([jx, jy], axis=1), total)
+        impulse += xp.where(touching, xp.sqrt(total[:, 0] * total[:, 0] + total[:, 1] * total[:, 1]), 0.0)
         self._touched |= touching
 
-    def _flush(self, rows: np.ndarray) -> None:
+    def _flush(self, mask: Any) -> None:
         # as the pymunk space's flush: the arbiters dropped, the bias velocities spent over zero time
-        a = self._teeth.arbiters
-        a.alive[rows], a.ticks[rows], a.exists[rows], a.features[rows] = False, 0, False, -1
-        a.jn[rows], a.jt[rows] = 0.0, 0.0
-        for b in self._teeth.bias:
-            b[rows] = 0.0
+        xp = self.xp
+        self._teeth.arbiters.drop(mask, xp)
+        self._teeth.bias = [xp.where(mask, 0.0, b) for b in self._teeth.bias]
 
     def _place(self, rows: np.ndarray, blade: np.ndarray, hand: np.ndarray) -> None:
         self._blade[rows] = blade
         self._hand[rows] = hand
-        self._flush(rows)
+        mask = np.zeros(self.n, dtype=bool)
+        mask[rows] = True
+        self._flush(mask)

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..contact import TongueContact
 from .batch import LaryngoscopeArrays
-from .incisors import PERSISTENCE, TINY, segment_normal
+from .incisors import PERSISTENCE, TINY
 from .params import SPRING_LENGTH, LaryngoscopeParams
 from .physics import Constants, tongue_substep_floats
 from .rigid import HAND_ANCHORS, Coupling
@@ -344,10 +344,9 @@ class LaryngoscopeKernel(LaryngoscopeArrays):
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         super().__init__(params, contact, n)
         s = self._teeth.solver
-        ends = np.array(s.segment, dtype=np.float64)
         self._kernel_args = (substep_tuple(self.c), np.asarray(contact.loads, dtype=np.float64),
                              np.asarray(contact.slopes, dtype=np.float64), coupling_tuple(self._coupling), s.local,
-                             s.local_normals, ends, segment_normal(ends),
+                             s.local_normals, s.ends, s.seg_normal,
                              s.radius, s.friction, s.slop, s.bias_coef, SOLVER_ITERATIONS, self._teeth.dt_coef)
 
     def substeps(self, vX: np.ndarray, vY: np.ndarray, spin: np.ndarray, v_lat: np.ndarray, count: int) -> None:

@@ -11,7 +11,7 @@ computed outside the space as today), in Chipmunk's order of operations:
 4. ``iterations`` passes of each spring's implicit damping impulse (``applyImpulse``), the springs in
    the order they were added.
 
-With :class:`Incisors` (numpy arrays), the blade's contact with the incisors joins in where Chipmunk
+With :class:`Incisors` (arrays), the blade's contact with the incisors joins in where Chipmunk
 runs it (:mod:`.incisors`): the collision and the arbiters' pre-step after the positions, their cached
 impulses after the velocities, their impulses before the springs' in each pass, and the bias velocity
 of position correction spent at the next step's positions. Chipmunk's expressions are kept as written
@@ -24,8 +24,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
-
-import numpy as np
 
 from ..._ops import PhysicsOps
 from . import incisors
@@ -57,14 +55,15 @@ HAND_ANCHORS = ((-SPRING_LENGTH, 0.0), (0.0, SPRING_LENGTH))
 
 @dataclass
 class Incisors:
-    """The incisors' contact for a batch (numpy only): the solver's constants, each device's arbiter, the
-    blade's position-correction velocity (x, y, spin: Chipmunk's bias velocity, spent at the next step's
-    position update) and the ratio of this step to the last (Chipmunk's ``dt_coef``: 0 at a space's
-    first step, 1 after)."""
+    """The incisors' contact for a batch (arrays of the namespace ``xp``: numpy, or torch through
+    ``array_api_compat``): the solver's constants, each device's arbiter, the blade's position-correction
+    velocity (x, y, spin: Chipmunk's bias velocity, spent at the next step's position update) and the
+    ratio of this step to the last (Chipmunk's ``dt_coef``: 0 at a space's first step, 1 after)."""
 
     solver: incisors.Solver
     arbiters: incisors.Arbiters
-    bias: list[np.ndarray]
+    bias: list[Any]
+    xp: Any
     dt_coef: float = 1.0
 
 
@@ -86,10 +85,10 @@ def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[A
     else:
         bvx, bvy, bw = teeth.bias
         px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
-        teeth.bias = [np.zeros_like(bvx), np.zeros_like(bvy), np.zeros_like(bw)]
+        teeth.bias = [teeth.xp.zeros_like(bvx), teeth.xp.zeros_like(bvy), teeth.xp.zeros_like(bw)]
     ca, sa, cp, sp = ops.cos(a), ops.sin(a), ops.cos(pitch), ops.sin(pitch)
     if teeth is not None:                       # collide, then the arbiters' pre-step before the springs'
-        touching = incisors.prestep(teeth.arbiters, teeth.solver, px, py, ca, sa)
+        touching = incisors.prestep(teeth.arbiters, teeth.solver, px, py, ca, sa, teeth.xp)
         bounce = incisors.bounce_velocity(teeth.arbiters, vx, vy, w)
     qx, qy = c.grip
     r2x, r2y = ca * qx + -sa * qy, sa * qx + ca * qy
@@ -118,11 +117,12 @@ def coupling_step(blade: tuple[Any, ...], hand: tuple[Any, ...], hand_v: tuple[A
     vx, vy = vx * 1.0 + (0.0 + fx * c.m_inv) * h, vy * 1.0 + (0.0 + fy * c.m_inv) * h
     w = w * 1.0 + torque * c.i_inv * h
     if teeth is not None:
-        vx, vy, w = incisors.apply_cached(teeth.arbiters, touching, teeth.solver, teeth.dt_coef, vx, vy, w)
+        vx, vy, w = incisors.apply_cached(teeth.arbiters, touching, teeth.solver, teeth.dt_coef, vx, vy, w, teeth.xp)
     # 4. the implicit damping impulses (applyImpulse): the contact's, then the springs' in the order added
     for _ in range(iterations):
         if teeth is not None:
-            vx, vy, w = incisors.apply_impulse(teeth.arbiters, touching, teeth.solver, bounce, vx, vy, w, teeth.bias)
+            vx, vy, w = incisors.apply_impulse(teeth.arbiters, touching, teeth.solver, bounce, vx, vy, w, teeth.bias,
+                                               teeth.xp)
         for s in springs:
             r1x, r1y, nx, ny, n_mass, v_coef, target, acc = s
             rel_x = (vx + -r2y * w) - (hvx + -r1y * hw)

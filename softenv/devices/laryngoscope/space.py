@@ -221,7 +221,7 @@ class LaryngoscopeBase:
         return DeviceState(np.tile([bx, by, 0.0, 0.0, 0.0, 0.0], (n, 1)), np.tile([gx, gy, 0.0], (n, 1)),
                            np.zeros((n, 4)), np.zeros((n, 5)), np.zeros((n, 4)))
 
-    def blade_pose(self) -> np.ndarray:
+    def blade_pose(self) -> Any:
         """``(n, 4)``: x, z (m), pitch (rad) of the blade's centre of mass and its lateral y (m)."""
         x, y, a = self.kinematics()[:3]
         return self._rows(x, y, a, self._lateral_state()[0])
@@ -240,7 +240,7 @@ class LaryngoscopeBase:
                         "radius": p.radius})
         return out
 
-    def haptic_force(self) -> np.ndarray:
+    def haptic_force(self) -> Any:
         """Force ``(n, 3)`` (world x, y, z; N) that the preset device renders to the hand: the coupling's
         pull on the hand, scaled and saturated (:func:`softenv.devices.presets.render_force`)."""
         return self._rows(*self._rendered())

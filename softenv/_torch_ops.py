@@ -1,0 +1,57 @@
+"""The elementwise operations of :mod:`softenv._ops` on torch tensors: the task's formulas in the torch
+twin and the laryngoscope's physics on tensors (:mod:`softenv.devices.laryngoscope.tensors`).
+
+Not bit for bit with numpy: torch computes ``cos``, ``sin``, ``exp``, ``atan2`` and ``asin`` with its
+own vector code, so a tensor batch agrees with the numpy one to rounding (tested per use). Two rules
+keep it in float64 where numpy is: an index is a float64 tensor of whole numbers (``int64 * float``
+is float32 in torch, float64 in numpy), cast to ``int64`` only to take.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import array_api_compat.torch as xp_torch
+import torch
+
+
+class TorchOps:
+    """:class:`~softenv._ops.PhysicsOps` on tensors, with ``xp``, their array namespace (torch through
+    ``array_api_compat``, with numpy's names) for the code that is written for whole arrays."""
+
+    xp = xp_torch
+    sqrt = staticmethod(torch.sqrt)
+    cos = staticmethod(torch.cos)
+    sin = staticmethod(torch.sin)
+
+    @staticmethod
+    def exp(x: Any) -> Any:
+        return torch.exp(x) if isinstance(x, torch.Tensor) else math.exp(x)      # a constant of the step: a float
+    atan2 = staticmethod(torch.atan2)
+    asin = staticmethod(torch.asin)
+
+    @staticmethod
+    def positive(x: torch.Tensor) -> torch.Tensor:
+        return torch.clamp(x, min=0.0)
+
+    @staticmethod
+    def clip(x: torch.Tensor, low: Any, high: Any) -> torch.Tensor:
+        return torch.clamp(x, low, high)
+
+    @staticmethod
+    def where(condition: torch.Tensor, a: Any, b: Any) -> torch.Tensor:
+        return torch.where(condition, a, b)
+
+    @staticmethod
+    def index(x: torch.Tensor, top: int) -> torch.Tensor:
+        """``x`` (>= 0) truncated to a whole number, at most ``top`` (float64, see the module docstring)."""
+        return torch.clamp(torch.trunc(x), max=top)
+
+    @staticmethod
+    def take(values: torch.Tensor, i: torch.Tensor) -> torch.Tensor:
+        return values[i.to(torch.int64)]
+
+    @staticmethod
+    def stack(columns: list[torch.Tensor]) -> torch.Tensor:
+        return torch.stack(columns, dim=-1)

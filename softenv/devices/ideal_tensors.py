@@ -1,0 +1,42 @@
+"""The ideal device on torch tensors (:class:`~softenv.devices.base.DeviceTensors`): the action is the
+force, for the torch twin."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from .base import Config, DeviceScene
+from .ideal import IDEAL_OBS, ForceBox
+
+
+class IdealDeviceTensors:
+    """``n`` ideal devices on tensors: :class:`~softenv.devices.ideal.IdealDeviceBatch` on torch."""
+
+    obs_names = IDEAL_OBS
+    info_keys: tuple[str, ...] = ()
+    episode_info_keys: tuple[str, ...] = ()
+
+    def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
+                 dtype: torch.dtype) -> None:
+        box = ForceBox(scene.workspace)
+
+        def tensor(value: Any) -> torch.Tensor:
+            return torch.as_tensor(np.asarray(value, dtype=np.float64), device=torch_device).to(dtype)
+
+        self._mid, self._half, self._rest = tensor(box.mid), tensor(box.half), tensor(box.rest_action)
+
+    def reset(self, mask: torch.Tensor) -> torch.Tensor:
+        return self._rest
+
+    def act(self, actions: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        f = self._mid + actions * self._half
+        return f, f[:, 2], f[:, 3]
+
+    def observation(self, features: torch.Tensor) -> torch.Tensor:
+        return (features - self._mid) / self._half
+
+    def report(self, info: dict[str, Any], stepped: torch.Tensor) -> float:
+        return 0.0

@@ -1,0 +1,116 @@
+"""``n`` laryngoscopes on torch tensors, CPU or GPU, for the torch twin (:class:`LaryngoscopeTensors`,
+and the part it composes, :class:`LaryngoscopeTensorPart`).
+
+The numpy array engine (:class:`~.batch.LaryngoscopeArrays`: :mod:`.rigid`, :mod:`.incisors`,
+:mod:`.physics`) is written against an ``ops`` class and an array namespace; here they are
+:class:`~softenv._torch_ops.TorchOps` and torch through ``array_api_compat``, so the same code steps
+tensors. The physics stays float64 whatever the env's dtype (the contact's stiffness spans five
+decades); the env reads its features and forces in its own dtype. It agrees with the numpy engine, and
+so with the pymunk device, to rounding, not bit for bit: torch's ``cos``, ``sin`` and ``exp`` are its
+own (``tests/test_torch_laryngoscope.py`` states the bound). A step never reads back to the host.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..._torch_ops import TorchOps
+from ..base import Config, DeviceScene
+from ..contact import TongueContact
+from . import LARYNGOSCOPE_OBS
+from .batch import LaryngoscopeArrays
+from .params import LaryngoscopeParams
+from .part import INFO_KEYS, incisor_term, laryngoscope_parts
+from .space import DeviceState
+
+
+class LaryngoscopeTensors(LaryngoscopeArrays):
+    """``n`` laryngoscopes on float64 tensors of ``torch_device``: :class:`~.batch.LaryngoscopeArrays`
+    with torch's operations. Its :meth:`state` is on the host (numpy), as the other engines'."""
+
+    ops = TorchOps
+    xp = TorchOps.xp
+    _own: Any = staticmethod(torch.clone)
+
+    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
+                 torch_device: torch.device | str = "cpu") -> None:
+        self.torch_device = torch.device(torch_device)
+        super().__init__(params, contact, n)
+
+    def _array(self, value: Any) -> torch.Tensor:
+        if isinstance(value, torch.Tensor):
+            return value.to(self.torch_device)
+        return torch.as_tensor(np.asarray(value), device=self.torch_device)
+
+    def state(self) -> DeviceState:
+        bodies = self._bodies()
+        host = [x.cpu().numpy() for x in (bodies[:, 1], bodies[:, 0, :3], self._lateral,
+                                          torch.cat([self._contact, self._incisor[:, None]], dim=1), self._hand_v)]
+        return DeviceState(*host)
+
+    def load_state(self, s: DeviceState, rows: Any = None) -> None:
+        """Set the masked devices (all by default) from the matching rows of ``s`` (``n`` rows, numpy or
+        tensors): a masked write, with no read of the mask on the host."""
+        if len(s.blade) != self.n:
+            raise ValueError(f"state has {len(s.blade)} devices; this batch has n={self.n}")
+        mask = torch.ones(self.n, dtype=torch.bool, device=self.torch_device) if rows is None else rows
+        m, t = mask[:, None], self._array
+        self._blade = torch.where(m, t(s.blade), self._blade)
+        self._hand = torch.where(m, t(s.hand), self._hand)
+        self._lateral = torch.where(m, t(s.lateral), self._lateral)
+        contact = t(s.contact)
+        self._contact = torch.where(m, contact[:, :4], self._contact)
+        self._incisor = torch.where(mask, contact[:, 4], self._incisor)
+        self._hand_v = torch.where(m, t(s.hand_velocity), self._hand_v)
+        self._touched = torch.where(mask, False, self._touched)
+        self._flush(mask)
+        self._forget()
+
+
+class LaryngoscopeTensorPart:
+    """The laryngoscope as the torch twin composes it (:class:`~softenv.devices.base.DeviceTensors`): as
+    :class:`~.part_batch.LaryngoscopePartBatch` (the workspace clip, the incisor reward term, the info
+    keys) on tensors; no clinical record (the numpy twin keeps it)."""
+
+    obs_names = LARYNGOSCOPE_OBS
+    info_keys = INFO_KEYS
+    episode_info_keys: tuple[str, ...] = ()
+
+    def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
+                 dtype: torch.dtype) -> None:
+        self.laryngoscopes = LaryngoscopeTensors(*laryngoscope_parts(scene, config), n, torch_device)
+        self.dtype = dtype
+        start = self.laryngoscopes.start_state(n)
+        self._start_state = DeviceState(*(self.laryngoscopes._array(v) for v in vars(start).values()))  # type: ignore[arg-type]
+        t = self.laryngoscopes._array
+        self._low, self._high = t(scene.workspace.low), t(scene.workspace.high)
+        self._rest = t(scene.rest_features)
+        self._prev = torch.zeros(4, dtype=dtype, device=torch_device)
+        self._weights = dict(config["reward"])
+
+    def reset(self, mask: torch.Tensor) -> torch.Tensor:
+        self.laryngoscopes.load_state(self._start_state, rows=mask)
+        return self._prev
+
+    def act(self, actions: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        dev = self.laryngoscopes
+        dev.control_step(actions.to(torch.float64), moving=stepped)
+        features, touching = dev.features()
+        clipped = torch.minimum(torch.maximum(features, self._low), self._high)
+        f = torch.where(touching[:, None], clipped, self._rest)
+        return f.to(self.dtype), dev.normal_force.to(self.dtype), dev.sideways_force.to(self.dtype)
+
+    def observation(self, features: torch.Tensor) -> torch.Tensor:
+        return self.laryngoscopes.observation().to(self.dtype)
+
+    def report(self, info: dict[str, Any], stepped: torch.Tensor) -> torch.Tensor:
+        dev = self.laryngoscopes
+        incisor = dev.incisor_force
+        term = incisor_term(incisor, self._weights).to(self.dtype)
+        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force.to(self.dtype),
+                     "incisor_force_N": incisor.to(self.dtype), "haptic_force_N": dev.haptic_force().to(self.dtype),
+                     "blade_pose": dev.blade_pose().to(self.dtype)})
+        return term

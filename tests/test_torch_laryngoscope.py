@@ -1,0 +1,126 @@
+"""The laryngoscope on torch tensors (softenv.devices.laryngoscope.tensors) against the numpy array engine,
+which equals the single pymunk device bit for bit (tests/test_laryngoscope_arrays.py), and the torch twin
+on the haptic ids against the numpy twin."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from softenv.devices.laryngoscope.batch import LaryngoscopeArrays  # noqa: E402
+from softenv.devices.laryngoscope.part import laryngoscope_parts  # noqa: E402
+from softenv.devices.laryngoscope.tensors import LaryngoscopeTensors  # noqa: E402
+from softenv.envs import HAPTIC_SCENES  # noqa: E402
+from softenv.envs.config import scene_config  # noqa: E402
+from softenv.envs.world import World  # noqa: E402
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+FIELDS = ("blade", "hand", "lateral", "contact", "hand_velocity")
+
+
+def _rollout_actions(periods, n, seed=4):
+    """Pressing, then two devices inserting and levering on the incisors (into the walls), idling, random."""
+    actions = np.random.default_rng(seed).uniform(-1, 1, (periods, n, 4))
+    part = max(periods // 8, 1)
+    actions[:2 * part, :, 1] = np.abs(actions[:2 * part, :, 1])
+    actions[2 * part:6 * part, :2] = [1.0, 0.0, 0.0, 1.0]
+    actions[6 * part:6 * part + part // 2] = 0.0
+    return actions
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("sections, periods, on_incisors", [
+    ({}, 100, 5),
+    ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 1, 0),
+    ({"tissue": {"E": 1e3}}, 40, 0),
+], ids=["default", "stiff", "soft"])
+def test_the_tensor_batch_agrees_with_the_numpy_engine_over_whole_rollouts(sections, periods, on_incisors, device):
+    """Every control period of a rollout (pressing, levering on the incisors and into the walls, idle,
+    random) on the default scene and the documented extreme corners (1e6 N/m coupling, 10 g blade, 10 MPa
+    tongue: one period of its 1,826 substeps; a 1 kPa tongue): the blade's pose within 1e-9 (m, rad), the hands
+    exactly, the lateral state, the tongue's and incisors' forces and the observation within 1e-5 of their
+    largest value in the rollout (measured: 2e-8 of it; torch's cos, sin and exp are not the C
+    library's, and the lateral stick-slip switches on a comparison, so rounding grows there)."""
+    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], sections))
+    parts = laryngoscope_parts(world.scene, world.config)
+    n = 4
+    ref, mine = LaryngoscopeArrays(*parts, n), LaryngoscopeTensors(*parts, n, device)
+    peaks = {f: 1e-300 for f in FIELDS}
+    incisors = 0
+    for a in _rollout_actions(periods, n):
+        ref.control_step(a)
+        mine.control_step(torch.as_tensor(a, device=device))
+        s, t = ref.state(), mine.state()
+        for f in FIELDS:
+            x, y = getattr(s, f), getattr(t, f)
+            peaks[f] = max(peaks[f], float(np.abs(x).max()))
+            tol = 1e-9 if f == "blade" else 1e-5 * peaks[f]
+            assert np.abs(x - y).max() <= tol, (f, np.abs(x - y).max(), tol)
+        np.testing.assert_allclose(mine.observation().cpu().numpy(), ref.observation(), rtol=0, atol=1e-5)
+        incisors += int(np.count_nonzero(ref.incisor_force > 0))
+    assert incisors >= on_incisors
+    assert mine.observation().device.type == device
+
+
+def _make(env_id, backend, **kwargs):
+    extra = {"backend": "torch", "dtype": kwargs.pop("dtype", torch.float64)} if backend == "torch" else \
+        {"device": {"batch_engine": "numpy"}}
+    return gym.make_vec(f"softenv:{env_id}", vectorization_mode="vector_entry_point", **extra, **kwargs)
+
+
+@pytest.mark.parametrize("env_id,mode,obs_mode", [("SoftSphereHaptic-v0", "next_step", "vector"),
+                                                  ("SoftSphereHapticProcedure-v0", "same_step", "dict")])
+def test_the_torch_twin_steps_the_haptic_ids_as_the_numpy_twin(env_id, mode, obs_mode):
+    """float64 on CPU tensors against the numpy twin, the same seeds and actions (pressing into the tongue,
+    inserting and levering, random) through autoresets: observations within float32 rounding, rewards
+    and every info (the device's among them: incisor, tongue and haptic force, blade pose) within 1e-6 of
+    their scale, the same flags. (The incisors' contact itself: the test above.)"""
+    n = 3
+    ref = _make(env_id, "numpy", num_envs=n, autoreset_mode=mode, obs_mode=obs_mode, max_episode_steps=25)
+    env = _make(env_id, "torch", num_envs=n, autoreset_mode=mode, obs_mode=obs_mode, max_episode_steps=25)
+    obs_ref, _ = ref.reset(seed=11)
+    obs, _ = env.reset(seed=11)
+    actions = _rollout_actions(60, n, seed=5).astype(np.float32)
+    resets = 0
+    for a in actions:
+        pairs = [(obs_ref, obs)] if obs_mode == "vector" else [(obs_ref[k], obs[k]) for k in obs_ref]
+        for x, y in pairs:
+            np.testing.assert_allclose(y.numpy(), x, rtol=1e-5, atol=1e-5)
+        obs_ref, r_ref, te_ref, tr_ref, info_ref = ref.step(a)
+        obs, r, te, tr, info = env.step(torch.as_tensor(a))
+        np.testing.assert_allclose(r.numpy(), r_ref, rtol=1e-6, atol=1e-6)
+        assert np.array_equal(te_ref, te.numpy()) and np.array_equal(tr_ref, tr.numpy())
+        stepped = info_ref.get("_normalized_score", np.zeros(n, dtype=bool))      # none on an all-reset step
+        assert np.array_equal(info["_normalized_score"].numpy(), stepped)
+        for key in ("reward_incisor", "incisor_force_N", "tongue_force_N", "haptic_force_N", "blade_pose",
+                    "normalized_score", "force_N"):
+            if stepped.any():
+                x, y = np.asarray(info_ref[key], dtype=np.float64)[stepped], info[key].numpy()[stepped]
+                np.testing.assert_allclose(y, x, rtol=1e-6, atol=1e-6 * max(1.0, float(np.abs(x).max())))
+        resets += int(np.sum(te_ref | tr_ref))
+    assert resets >= 2 * n
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_float32_tensors_keep_the_device_in_float64_and_stay_near_it(device):
+    """A float32 env keeps the laryngoscope's physics in float64 (its contact spans five decades of
+    stiffness) and returns float32 tensors on its device within 1e-4 of the float64 env."""
+    e64 = _make("SoftSphereHaptic-v0", "torch", num_envs=4)
+    e32 = _make("SoftSphereHaptic-v0", "torch", num_envs=4, dtype=torch.float32, torch_device=device)
+    e64.reset(seed=0)
+    e32.reset(seed=0)
+    assert e32.unwrapped._device.laryngoscopes._blade.dtype == torch.float64
+    for a in torch.as_tensor(_rollout_actions(25, 4, seed=2), dtype=torch.float32):
+        o64, r64, _, _, i64 = e64.step(a)
+        o32, r32, _, _, i32 = e32.step(a.to(device))
+        assert r32.dtype == torch.float32 and r32.device.type == device and o32.device.type == device
+        np.testing.assert_allclose(r32.cpu().numpy(), r64.numpy(), rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(o32.cpu().numpy(), o64.numpy(), rtol=0, atol=1e-4)
+
+
+def test_capturing_the_haptic_step_and_a_device_without_tensors_are_refused_by_name():
+    with pytest.raises(ValueError, match="compile_options=.*covers device.kind='ideal'"):
+        _make("SoftSphereHaptic-v0", "torch", num_envs=2, target_draw="device", compile_options={})
+    with pytest.raises(ValueError, match="device.kind='examples.probe_device:PROBE' has no tensor form"):
+        _make("SoftSphere-v0", "torch", num_envs=2, device={"kind": "examples.probe_device:PROBE"})
