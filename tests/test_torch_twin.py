@@ -160,7 +160,10 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     rows = run()
     assert (tmp_path / "perf-gpu_quick.md").exists()
     assert any(r.metric.startswith("host synchronisations") and r.ok for r in rows)
-    assert sum("torch twin on" in r.metric for r in rows) == 2 * 5     # 2 sizes x eager, compiled, 3 CUDA graphs
+    assert sum(r.metric.startswith("SoftSphere-v0: torch twin on") for r in rows) == 2 * 5  # 2 sizes x 5 modes
+    haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0:")]
+    assert haptic[0].metric.startswith("SoftSphereHaptic-v0: host synchronisations") and haptic[0].ok
+    assert len(haptic) == 1 + 2 + 1 and haptic[-1].target == ">= 50M"        # the sync check, 2 sizes, the best
 
 
 def test_the_gpu_rows_run_on_cpu_tensors_too():
@@ -169,12 +172,14 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     from softenv.bench.env import device_rows
 
     rows = device_rows("cpu", "cpu", (1024, 64), 2)
-    twins = [r for r in rows if "torch twin on cpu" in r.metric]
+    twins = [r for r in rows if r.metric.startswith("SoftSphere-v0: torch twin on cpu")]
     assert [("torch.compile" in r.metric, "1,024 envs" in r.metric) for r in twins] == [
         (False, True), (True, True), (False, False), (True, False)]
     assert all(r.value > 0 and r.target == ">= 10M" and r.ok is (r.value >= 10e6) for r in twins[:2])
     assert all(r.target == "" and r.ok is None for r in twins[2:])
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
+    haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0:")]
+    assert len(haptic) == 1 and "64 envs" in haptic[0].metric and haptic[0].value > 0      # no target off CUDA
 
 
 def test_the_cuda_graph_timing_runs_on_cpu_tensors_and_leaves_inductor_as_it_was():

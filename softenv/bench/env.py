@@ -296,10 +296,10 @@ def bench_gpu(quick: bool, reference: Timing) -> list[Row]:
     if torch is None or not torch.cuda.is_available():
         raise RuntimeError("--device cuda: no CUDA device in this process (torch.cuda.is_available() is False)")
     sizes = (1024, 262_144) if quick else (1024, 262_144, 1_048_576)
-    return device_rows("cuda", torch.cuda.get_device_name(), sizes, 20 if quick else 100)
+    return device_rows("cuda", torch.cuda.get_device_name(), sizes, 20 if quick else 100, quick)
 
 
-def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
+def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int, quick: bool = False) -> list[Row]:
     """The rows of :func:`bench_gpu` on ``device`` (named ``name``); the host-sync check runs on CUDA
     only (``torch.cuda.set_sync_debug_mode``), elsewhere its row says so."""
     import torch                                            # torch: the rl extra
@@ -341,7 +341,8 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
                 continue
             rows.append(Row("gpu", label, rate, "env-steps/s", f"{rate / numpy_rate:.1f}x the numpy twin",
                             f">= {target / 1e6:.0f}M" if target else "", rate >= target if target else None))
-    return rows + haptic_tensor_rows(device, name, HAPTIC_GPU_SIZES if device == "cuda" else (64,), 3)
+    haptic_sizes = (HAPTIC_GPU_SIZES[:2] if quick else HAPTIC_GPU_SIZES) if device == "cuda" else (64,)
+    return rows + haptic_tensor_rows(device, name, haptic_sizes, 3)
 
 
 HAPTIC_ID = "SoftSphereHaptic-v0"
