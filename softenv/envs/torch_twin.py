@@ -1,4 +1,4 @@
-"""The batched SoftSphere twin in torch: the ideal-device ids on CPU or GPU tensors.
+"""The batched SoftSphere twin in torch: the ideal-device and laryngoscope ids on CPU or GPU tensors.
 
 ``gym.make_vec("SoftSphere-v0", num_envs=N, vectorization_mode="vector_entry_point", backend="torch",
 torch_device="cuda", dtype=torch.float32)`` makes a :class:`SoftSphereTorchVectorEnv`. It takes actions and
@@ -12,7 +12,9 @@ observation is float32 like the observation space.
 
 What it expresses: the tabulated response (``response.model = "exact"``, analytic or FE tissue, any
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
-dict. Not: the laryngoscope (pymunk has no tensors), regressor responses and vertex observations.
+dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal device, and the
+laryngoscope on float64 tensors, which agrees with the numpy engines to rounding and steps eagerly).
+Not: regressor responses and vertex observations.
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
 numpy generators and precomputes each episode on the host, so it plays the numpy twin's episodes;
@@ -50,7 +52,8 @@ _GRAPH_MODES = ("reduce-overhead", "max-autotune")     # torch.compile modes tha
 
 
 class SoftSphereTorchVectorEnv(VectorEnv):
-    """``num_envs`` ideal-device SoftSphere envs on torch tensors (see the module docstring).
+    """``num_envs`` SoftSphere envs on torch tensors, with the scene's device in its tensor form (see the
+    module docstring).
 
     Args:
         torch_device: torch device of every tensor (``"cpu"``, ``"cuda"``, ...); one this process cannot use is a
