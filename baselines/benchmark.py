@@ -72,11 +72,6 @@ def scene_baselines(plan: Plan, scene: str) -> list[str]:
     return [name for name in plan.baselines if applies(name, kind)]
 
 
-def scene_agents(plan: Plan, scene: str) -> list[str]:
-    """The plan's agents that train on the scene (``ppo-torch``: the ideal-device scenes only)."""
-    return [a for a in plan.agents if a != TORCH_PPO or device_kind(scene) == "ideal"]
-
-
 def check_names(plan: Plan) -> None:
     for name in plan.scenes:
         if name not in SCENES:
@@ -97,7 +92,7 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
         out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes, plan.oracle)))
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
-        for algo in scene_agents(plan, scene):
+        for algo in plan.agents:
             fn = torch_agent_job if algo == TORCH_PPO else agent_job
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
@@ -222,7 +217,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             timings[r.key] = r.wall_s
             if r.ok:
                 summaries.append(_with(anchored(r.value).summary(), kind="baseline", seeds=1))
-        for algo in scene_agents(plan, scene):
+        for algo in plan.agents:
             runs = [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])]
             timings[f"{scene} {algo}"] = sum(r.wall_s for r in runs)
             done = [r.value for r in runs if r.ok]

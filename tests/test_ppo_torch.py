@@ -1,5 +1,6 @@
 """baselines/ppo_torch.py: a short CPU run learns, is reproducible, and its weights load back safely."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -66,7 +67,7 @@ def test_weights_load_back_and_mismatches_are_refused(trained, tmp_path):
 
 
 def test_compare_runs_ppo_torch_on_the_ideal_scenes_and_says_where(tmp_path):
-    from baselines.benchmark import Plan, run, scene_agents
+    from baselines.benchmark import Plan, run
 
     plan = Plan(["SoftSphere-v0"], ["zero"], ["ppo-torch"], {"SoftSphere-v0": 1}, {"ppo-torch": 16 * 128 * 2}, episodes=5)
     lines = []
@@ -76,8 +77,21 @@ def test_compare_runs_ppo_torch_on_the_ideal_scenes_and_says_where(tmp_path):
     assert row["kind"] == f"agent (4,096 steps, torch on {device})" and row["episodes"] == 5
     assert (tmp_path / "runs" / "SoftSphere-v0" / "ppo-torch-0" / "ppo-torch.pt").exists()
     assert torch.cuda.is_available() or any("no GPU in this process" in line for line in lines)
-    haptic = Plan(["SoftSphereHaptic-v0"], [], ["ppo", "ppo-torch"], {"SoftSphereHaptic-v0": 1})
-    assert scene_agents(haptic, "SoftSphereHaptic-v0") == ["ppo"]          # the torch twin has no laryngoscope
+
+
+@pytest.mark.parametrize("scene", ["SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0"])
+def test_ppo_torch_trains_on_the_laryngoscope_scenes(scene, tmp_path):
+    """The torch twin steps the laryngoscope, so the torch PPO trains on both haptic ids (two updates
+    here), sees the device's observation, and its weights load back for that scene only."""
+    args = Args(scene=scene, seed=0, num_envs=8, num_steps=32, total_timesteps=8 * 32 * 2)
+    agent, run = train(args, log=lambda line: None)
+    assert run["env_steps"] == 8 * 32 * 2
+    assert agent.norm.mean.shape[0] == gym.make(f"softenv:{scene}").observation_space.shape[0]
+    save(agent, args, tmp_path / "a.pt")
+    result = evaluate(TorchPolicy(load(tmp_path / "a.pt", scene)), scene, episodes=2)
+    assert np.isfinite(result.values["error_sum_mm"]).all()
+    with pytest.raises(ValueError, match=f"trained on scene '{scene}'"):
+        load(tmp_path / "a.pt", "SoftSphere-v0")
 
 
 def test_the_command_line_sets_the_batch_shape_and_reports_it(tmp_path):
