@@ -289,7 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"baseline policies: {', '.join(benchmark.BASELINES)} (default: all; none: no baselines)")
     p.add_argument("--agents", nargs="*", choices=list(benchmark.AGENTS), metavar="AGENT",
                    help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
-                   "present; ideal-device scenes) (default: quick and full: the four SB3 agents)")
+                   "present; every scene) (default: quick and full: the four SB3 agents)")
     p.add_argument("--episodes", type=_bounded(int, 1, 100_000),
                    help="test episodes per policy and scene (1-100000; default 100)")
     p.add_argument("--out", default="reports", help="report directory (default: reports, which git ignores; "
