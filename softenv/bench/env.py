@@ -308,17 +308,7 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int, quic
     rows = [Row("gpu", "SoftSphere-v0: numpy twin on one CPU core, 1024 envs", numpy_rate, "env-steps/s")]
     if device == "cuda":
         env = _torch_twin(1024, device, torch.float32, "device")
-        action = torch.zeros((1024, 4), device=device)
-        torch.cuda.synchronize()
-        torch.cuda.set_sync_debug_mode("error")          # any host synchronisation inside step raises
-        try:
-            for _ in range(env.unwrapped.world.horizon + 1):    # through the steps where episodes start
-                env.step(action)
-            synced = ""
-        except RuntimeError as exc:
-            synced = str(exc).splitlines()[0]
-        finally:
-            torch.cuda.set_sync_debug_mode("default")
+        synced = host_synchronisation(env, env.unwrapped.world.horizon + 1)    # through the episode starts
         rows.append(Row("gpu", f"host synchronisations in an episode's steps ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     else:
@@ -358,18 +348,7 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
 
     rows = []
     if device == "cuda":
-        env = _torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID)
-        action = torch.zeros((1024, 4), device=device)
-        torch.cuda.synchronize()
-        torch.cuda.set_sync_debug_mode("error")
-        try:
-            for _ in range(3):
-                env.step(action)
-            synced = ""
-        except RuntimeError as exc:
-            synced = str(exc).splitlines()[0]
-        finally:
-            torch.cuda.set_sync_debug_mode("default")
+        synced = host_synchronisation(_torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID), 3)
         rows.append(Row("gpu", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     rates = []
@@ -390,6 +369,24 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
                         "eager (the step is not captured: see docs/laryngoscope.md)",
                         f">= {HAPTIC_GPU_TARGET / 1e6:.0f}M", best >= HAPTIC_GPU_TARGET))
     return rows
+
+
+def host_synchronisation(env: Any, steps: int) -> str:
+    """The first line of the error that the first host synchronisation in ``steps`` steps of ``env`` (a torch
+    twin on CUDA) raises under ``torch.cuda.set_sync_debug_mode("error")``; "" when there is none."""
+    import torch                                            # torch: the rl extra
+
+    action = torch.zeros((env.num_envs, 4), device=env.unwrapped.torch_device)
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")          # any host synchronisation inside step raises
+    try:
+        for _ in range(steps):
+            env.step(action)
+        return ""
+    except RuntimeError as exc:
+        return str(exc).splitlines()[0]
+    finally:
+        torch.cuda.set_sync_debug_mode("default")
 
 
 def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int,
