@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from softenv.devices.base import Config, DeviceKind, DeviceScene
-from softenv.devices.ideal import ForceBox
+from softenv.devices.force_box import ForceBox
 
 PROBE_OBS = ("insertion", "lateral", "depth", "normal")
 

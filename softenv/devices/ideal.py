@@ -1,8 +1,5 @@
-"""The ideal device: the action *is* the force, with no dynamics (SoftSphere-v0 and its kin).
-
-:class:`ForceBox` is the affine map between action units ``[-1, 1]^4`` and the scene's force-feature
-box; every scene has one (targets are given in its units), whatever its device.
-"""
+"""The ideal device: the action *is* the force, with no dynamics (SoftSphere-v0 and its kin): the
+scene's :class:`~.force_box.ForceBox` alone."""
 
 from __future__ import annotations
 
@@ -10,41 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from ..forces import Workspace
 from .base import Config, DeviceKind, DeviceScene
-
-IDEAL_OBS = ("insertion", "lateral", "normal", "sideways")
-
-
-class ForceBox:
-    """Action units ``[-1, 1]^4`` <-> force features: ``low + (a + 1) (high - low) / 2`` per column.
-
-    Columns: insertion (m of arc along the midline), lateral (m of arc off the midline), normal force
-    (N, pressing), sideways force (N, toward +y). ``rest_action`` is zero force at mid contact.
-    """
-
-    def __init__(self, workspace: Workspace) -> None:
-        low, high = np.asarray(workspace.low), np.asarray(workspace.high)
-        self.mid = (low + high) / 2
-        self.half = (high - low) / 2
-        self._mid, self._half = self.mid.tolist(), self.half.tolist()
-        self.rest_action = np.array([0.0, 0.0, -1.0, 0.0], dtype=np.float32)
-
-    def features(self, action: np.ndarray) -> np.ndarray:
-        """Force features of actions ``(..., 4)``."""
-        return self.mid + action * self.half
-
-    def features_one(self, action: list[float]) -> list[float]:
-        """:meth:`features` of one action given as Python floats (the same bits)."""
-        return [m + a * h for m, a, h in zip(self._mid, action, self._half)]
-
-    def normalised(self, features: np.ndarray) -> np.ndarray:
-        """Features mapped back onto ``[-1, 1]``."""
-        return (features - self.mid) / self.half
-
-    def normalised_one(self, features: list[float]) -> list[float]:
-        """:meth:`normalised` of one row of Python floats (the same bits)."""
-        return [(f - m) / h for f, m, h in zip(features, self._mid, self._half)]
+from .force_box import IDEAL_OBS, ForceBox
 
 
 class IdealDevice:

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from .base import Config, DeviceScene
-from .ideal import IDEAL_OBS, ForceBox
+from .force_box import IDEAL_OBS, ForceBox
 
 
 class IdealDeviceTensors:

@@ -21,7 +21,7 @@ from .._validation import real_array
 from ..response import TabulatedResponse
 from ..response.exact import TableWork
 from ..devices.base import DeviceKind, device_kind
-from ..devices.ideal import ForceBox
+from ..devices.force_box import ForceBox
 from .task import Dynamics, TargetFamily, procedure_schedule
 from .scene import Scene, build_scene, degrees_to_features
 
