@@ -140,10 +140,13 @@ def test_bench_reports_the_torch_twin_beside_the_numpy_twin(tmp_path):
     rows = bench.run(True, tmp_path, ["torch"], command="softenv bench --quick --only torch", echo=lambda s: None)
     names = [r.metric for r in rows]
     assert any("numpy twin, 1024 envs" in name for name in names)
-    torch_rows = [r for r in rows if "torch twin on cpu" in r.metric]
+    torch_rows = [r for r in rows if r.metric.startswith("SoftSphere-v0: torch twin on cpu")]
     assert [r.metric.split(", ")[1:3] for r in torch_rows] == [["float64", "host draw"], ["float32", "host draw"],
                                                               ["float32", "device draw"]]
-    assert all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows)
+    haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0: torch twin on cpu")]
+    assert len(haptic) == 1 and "1024 envs" in haptic[0].metric              # beside the compiled numpy twin
+    assert any(r.metric.startswith("SoftSphereHaptic-v0: numpy twin (compiled engine)") for r in rows)
+    assert all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows + haptic)
     gpu = [r for r in rows if "GPU" in r.metric]
     assert torch.cuda.is_available() or (gpu and "not measured" in gpu[0].spread)   # with a GPU: --device cuda
 
