@@ -46,13 +46,13 @@ class ArrayLaryngoscopes(LaryngoscopeBase):
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
         super().__init__(params, contact, n)
-        zeros = self._array
-        self._lateral = zeros(np.zeros((n, 4)))
-        self._contact = zeros(np.zeros((n, 4)))
-        self._incisor = zeros(np.zeros(n))
-        self._touched = zeros(np.zeros(n, dtype=bool))
-        self._hand_v = zeros(np.zeros((n, 4)))
-        self._loads, self._slopes = zeros(contact.loads), zeros(contact.slopes)
+        array = self._array
+        self._lateral = array(np.zeros((n, 4)))
+        self._contact = array(np.zeros((n, 4)))
+        self._incisor = array(np.zeros(n))
+        self._touched = array(np.zeros(n, dtype=bool))
+        self._hand_v = array(np.zeros((n, 4)))
+        self._loads, self._slopes = array(contact.loads), array(contact.slopes)
 
     def _bodies(self) -> np.ndarray:
         """``(n, 2, 6)`` local x, y, angle, vx, vy, spin of every hand (0) and blade (1)."""

@@ -40,6 +40,23 @@ def incisor_term(incisor_force: Any, weights: dict[str, float]) -> Any:
     return -weights["incisor_weight"] * (incisor_force / weights["safe_force"])
 
 
+def in_workspace(features: Any, touching: Any, low: Any, high: Any, rest: Any, xp: Any) -> Any:
+    """A batch's force features ``(n, 4)`` clipped to the scene's workspace, the rest features where a device
+    does not touch the tongue (numpy, or torch through ``array_api_compat``: ``xp``)."""
+    clipped = xp.minimum(xp.maximum(features, low), high)
+    return xp.where(touching[:, None], clipped, rest)
+
+
+def batch_report(dev: Any, weights: dict[str, float], cast: Any = None) -> tuple[Any, dict[str, Any]]:
+    """A batch's incisor reward term and its :data:`INFO_KEYS` values, each through ``cast`` (a dtype
+    conversion of tensors; none for arrays)."""
+    same = cast or (lambda x: x)
+    incisor = dev.incisor_force
+    term = same(incisor_term(incisor, weights))
+    return term, {"reward_incisor": term, "tongue_force_N": same(dev.tongue_force), "incisor_force_N": same(incisor),
+                  "haptic_force_N": same(dev.haptic_force()), "blade_pose": same(dev.blade_pose())}
+
+
 class PickledByState:
     """Pickles a part's pymunk physics (the attribute ``physics_name``) as its ``state()``, and rebuilds
     it from the scene when unpickled: pymunk's space cannot be pickled, and a device rebuilt from its

@@ -13,7 +13,7 @@ from ..base import Config, DeviceScene
 from . import LARYNGOSCOPE_OBS
 from .batch import ArrayLaryngoscopes, LaryngoscopeArrays, LaryngoscopeBatch
 from .kernel import LaryngoscopeKernel
-from .part import INFO_KEYS, PickledByState, glottic_view, incisor_term, laryngoscope_parts
+from .part import INFO_KEYS, PickledByState, batch_report, glottic_view, in_workspace, laryngoscope_parts
 from .space import DeviceState
 
 # device.batch_engine -> the batch it builds
@@ -54,19 +54,15 @@ class LaryngoscopePartBatch(PickledByState):
         dev, box = self.laryngoscopes, self._workspace
         dev.control_step(actions, moving=stepped)
         features, touching = dev.features()
-        clipped = np.minimum(np.maximum(features, box.low), box.high)
-        return np.where(touching[:, None], clipped, self._rest), dev.normal_force, dev.sideways_force
+        return in_workspace(features, touching, box.low, box.high, self._rest, np), dev.normal_force, dev.sideways_force
 
     def observation(self, features: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         obs = self.laryngoscopes.observation()
         return obs if mask is None else obs[mask]
 
     def report(self, info: dict[str, Any], stepped: np.ndarray) -> np.ndarray:
-        dev = self.laryngoscopes
-        incisor = dev.incisor_force
-        term = incisor_term(incisor, self._weights)
-        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force, "incisor_force_N": incisor,
-                     "haptic_force_N": dev.haptic_force(), "blade_pose": dev.blade_pose()})
+        term, values = batch_report(self.laryngoscopes, self._weights)
+        info.update(values)
         rows = np.flatnonzero(stepped)
         self.clinical.record(rows, self._clinical_values()[rows])
         return term

@@ -23,7 +23,7 @@ from ..contact import TongueContact
 from . import LARYNGOSCOPE_OBS
 from .batch import LaryngoscopeArrays
 from .params import LaryngoscopeParams
-from .part import INFO_KEYS, incisor_term, laryngoscope_parts
+from .part import INFO_KEYS, batch_report, in_workspace, laryngoscope_parts
 from .space import DeviceState
 
 
@@ -99,18 +99,13 @@ class LaryngoscopeTensorPart:
         dev = self.laryngoscopes
         dev.control_step(actions.to(torch.float64), moving=stepped)
         features, touching = dev.features()
-        clipped = torch.minimum(torch.maximum(features, self._low), self._high)
-        f = torch.where(touching[:, None], clipped, self._rest)
+        f = in_workspace(features, touching, self._low, self._high, self._rest, dev.xp)
         return f.to(self.dtype), dev.normal_force.to(self.dtype), dev.sideways_force.to(self.dtype)
 
     def observation(self, features: torch.Tensor) -> torch.Tensor:
         return self.laryngoscopes.observation().to(self.dtype)
 
     def report(self, info: dict[str, Any], stepped: torch.Tensor) -> torch.Tensor:
-        dev = self.laryngoscopes
-        incisor = dev.incisor_force
-        term = incisor_term(incisor, self._weights).to(self.dtype)
-        info.update({"reward_incisor": term, "tongue_force_N": dev.tongue_force.to(self.dtype),
-                     "incisor_force_N": incisor.to(self.dtype), "haptic_force_N": dev.haptic_force().to(self.dtype),
-                     "blade_pose": dev.blade_pose().to(self.dtype)})
+        term, values = batch_report(self.laryngoscopes, self._weights, lambda x: x.to(self.dtype))
+        info.update(values)
         return term
