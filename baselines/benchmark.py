@@ -486,9 +486,13 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.zeros_like(mean)
             ax.plot(steps, mean, color=colours[algo], label=algo)
             ax.fill_between(steps, mean - half, mean + half, color=colours[algo], alpha=0.25)
+        ends = [float(curves[scene, algo][0][0][-1]) for algo in plan.agents if curves.get((scene, algo))]
+        if max(ends) >= 4 * min(ends):              # budgets a decade apart: each agent's curve readable
+            ax.set_xscale("log")
+        else:
+            ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))        # 100k, not 100000: labels that fit
-        ax.xaxis.set_major_locator(MaxNLocator(4))
-        ax.set_xlabel("env steps")
+        ax.set_xlabel("env steps" + (" (log scale)" if ax.get_xscale() == "log" else ""))
         ax.set_ylabel("test-target episode return")
         ax.set_title(scene, fontsize=8)
     if not scenes:
