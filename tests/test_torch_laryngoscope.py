@@ -119,8 +119,61 @@ def test_float32_tensors_keep_the_device_in_float64_and_stay_near_it(device):
         np.testing.assert_allclose(o32.cpu().numpy(), o64.numpy(), rtol=0, atol=1e-4)
 
 
-def test_capturing_the_haptic_step_and_a_device_without_tensors_are_refused_by_name():
-    with pytest.raises(ValueError, match="compile_options=.*covers device.kind='ideal'"):
+def _state_tensors(env):
+    """Every tensor of the laryngoscopes' state that a step reads from the last one, by name."""
+    dev = env.unwrapped._device.laryngoscopes
+    arbiters = dev._teeth.arbiters
+    named = {name: getattr(dev, name) for name in dev._STATE}
+    named.update({f"arbiters.{name}": getattr(arbiters, name) for name in dev._ARBITER_STATE})
+    named.update({f"bias{i}": b for i, b in enumerate(dev._teeth.bias)})
+    return named
+
+
+def test_the_tensor_state_stays_where_the_last_step_wrote_it():
+    """What a CUDA graph of the step needs (it replays reads and writes at the addresses it recorded): every
+    state tensor keeps its address through steps levering on the teeth, autoresets and reset(), while its
+    values change."""
+    env = _make("SoftSphereHaptic-v0", "torch", num_envs=4, target_draw="device", check_actions=False,
+                max_episode_steps=30, autoreset_mode="same_step")
+    env.reset(seed=0)
+    actions = torch.as_tensor(_rollout_actions(70, 4, seed=3))
+    env.step(actions[0])
+    before = {name: (t.data_ptr(), t.clone()) for name, t in _state_tensors(env).items()}
+    assert "arbiters.normal" in before and len(before) == 7 + 7 + 3
+    for a in actions[1:]:
+        env.step(a)
+    env.reset(seed=1)
+    env.step(actions[1])
+    after = _state_tensors(env)
+    assert {name: t.data_ptr() for name, t in after.items()} == {name: p for name, (p, _) in before.items()}
+    assert not torch.equal(after["_blade"], before["_blade"][1]) and not torch.equal(after["_hand"], before["_hand"][1])
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a CUDA device")
+def test_the_recorded_haptic_step_replays_the_eager_one_bit_for_bit():
+    """cuda_graph=True on the laryngoscope (the step recorded once per value of the host's may-start flag and
+    replayed) against the eager step, the same seeds and actions, through autoresets and levering on the
+    teeth: the same bits in every output."""
+    kwargs = dict(num_envs=8, torch_device="cuda", dtype=torch.float32, target_draw="device", check_actions=False,
+                  max_episode_steps=12, autoreset_mode="same_step")
+    eager, graphed = _make("SoftSphereHaptic-v0", "torch", **kwargs), _make("SoftSphereHaptic-v0", "torch",
+                                                                              cuda_graph=True, **kwargs)
+    eager.reset(seed=5)
+    graphed.reset(seed=5)
+    ends = 0
+    for a in torch.as_tensor(_rollout_actions(40, 8, seed=6), dtype=torch.float32, device="cuda"):
+        o1, r1, te1, tr1, i1 = eager.step(a)
+        o2, r2, te2, tr2, i2 = graphed.step(a)
+        for x, y in [(o1, o2), (r1, r2), (te1, te2), (tr1, tr2), (i1["incisor_force_N"], i2["incisor_force_N"])]:
+            assert torch.equal(x, y)
+        ends += int((te1 | tr1).sum())
+    assert ends >= 8 * 3 and len(graphed.unwrapped._tensor_work.graphs) == 2
+
+
+def test_compiling_the_haptic_step_and_a_device_without_tensors_are_refused_by_name():
+    with pytest.raises(ValueError, match="compile_options=.*covers device.kind='ideal'.*cuda_graph=True records it"):
         _make("SoftSphereHaptic-v0", "torch", num_envs=2, target_draw="device", compile_options={})
+    with pytest.raises(ValueError, match="cuda_graph=True needs a CUDA device; got device='cpu'"):
+        _make("SoftSphereHaptic-v0", "torch", num_envs=2, target_draw="device", cuda_graph=True)
     with pytest.raises(ValueError, match="device.kind='examples.probe_device:PROBE' has no tensor form"):
         _make("SoftSphere-v0", "torch", num_envs=2, device={"kind": "examples.probe_device:PROBE"})

@@ -159,7 +159,8 @@ class DeviceBatch(DeviceNames, Protocol):
 class DeviceTensors(DeviceNames, Protocol):
     """``n`` devices on torch tensors of one torch device (the torch twin,
     :class:`softenv.envs.torch_twin.SoftSphereTorchVectorEnv`): :class:`DeviceBatch`'s step on tensors,
-    with no read back to the host, so that a GPU step never waits for it."""
+    with no read back to the host, so that a GPU step never waits for it, and its state written where the
+    last step left it (one address a tensor), so that the twin's ``cuda_graph`` may record the step."""
 
     def reset(self, mask: Any) -> Any:
         """Put the masked devices at rest; returns the previous action their episodes start with

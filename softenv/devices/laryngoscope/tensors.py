@@ -7,7 +7,9 @@ The numpy array engine (:class:`~.batch.LaryngoscopeArrays`: :mod:`.rigid`, :mod
 tensors. The physics stays float64 whatever the env's dtype (the contact's stiffness spans five
 decades); the env reads its features and forces in its own dtype. It agrees with the numpy engine, and
 so with the pymunk device, to rounding, not bit for bit: torch's ``cos``, ``sin`` and ``exp`` are its
-own (``tests/test_torch_laryngoscope.py`` states the bound). A step never reads back to the host.
+own (``tests/test_torch_laryngoscope.py`` states the bound). A step never reads back to the host, and
+leaves its state where the last one did (one address a tensor), so the torch twin can record the step as
+a CUDA graph (``cuda_graph=True``) that reads and writes the live state.
 """
 
 from __future__ import annotations
@@ -35,10 +37,37 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
     xp = TorchOps.xp
     _own: Any = staticmethod(torch.clone)
 
+    # what a step reads from the last one (the per-substep solver fields are made again each substep)
+    _STATE = ("_blade", "_hand", "_lateral", "_contact", "_incisor", "_touched", "_hand_v")
+    _ARBITER_STATE = ("alive", "ticks", "exists", "features", "jn", "jt", "normal")
+
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:
         self.torch_device = torch.device(torch_device)
+        self._homes: dict[tuple[str, str], torch.Tensor] = {}
         super().__init__(params, contact, n)
+
+    def control_step(self, actions: Any, moving: Any = None) -> None:
+        super().control_step(actions, moving)
+        self._keep_in_place()
+
+    def _keep_in_place(self) -> None:
+        """Copy the state the engine's code left in new tensors into the tensors that held it (one home
+        for each, made at the first call), and point at those: the next step reads where this one wrote."""
+        arbiters = self._teeth.arbiters
+        holders = [(self, name) for name in self._STATE] + [(arbiters, name) for name in self._ARBITER_STATE]
+        for holder, name in holders:
+            value = getattr(holder, name)
+            if value is not None:
+                home = self._homes.setdefault((type(holder).__name__, name), value.clone())
+                if home is not value:
+                    home.copy_(value)
+                    setattr(holder, name, home)
+        homes = [self._homes.setdefault(("bias", str(i)), b.clone()) for i, b in enumerate(self._teeth.bias)]
+        for home, value in zip(homes, self._teeth.bias):
+            if home is not value:
+                home.copy_(value)
+        self._teeth.bias = homes
 
     def _array(self, value: Any) -> torch.Tensor:
         if isinstance(value, torch.Tensor):
@@ -68,6 +97,7 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
         self._touched = torch.where(mask, False, self._touched)
         self._flush(mask)
         self._forget()
+        self._keep_in_place()
 
 
 class LaryngoscopeTensorPart:
