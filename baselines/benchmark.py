@@ -66,6 +66,13 @@ def full_plan() -> Plan:
     return Plan(list(SCENES), list(BASELINES), list(ALGOS), {s: 5 if s in FIVE_SEEDS else 3 for s in SCENES})
 
 
+def haptic_plan() -> Plan:
+    """The laryngoscope scenes alone: every baseline for the device, the four agents at their YAML budgets
+    (where their learning curves flatten, ``results/haptic-curves/``), 3 training seeds each."""
+    scenes = [s for s in SCENES if device_kind(s) == "laryngoscope"]
+    return Plan(scenes, list(BASELINES), list(ALGOS), {s: 3 for s in scenes})
+
+
 def scene_baselines(plan: Plan, scene: str) -> list[str]:
     """The plan's baselines that exist for the scene's device (``oracle`` ideal, ``expert`` laryngoscope)."""
     kind = device_kind(scene)

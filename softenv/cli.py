@@ -145,13 +145,10 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
     bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv), device=args.device)
 
 
-def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
-    if not bench.threads_pinned():
-        bench.reexec_single_threaded(argv)
-    missing = [name for name in ("stable_baselines3", "torch", "matplotlib") if importlib.util.find_spec(name) is None]
-    if missing:
-        raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {missing} missing")
-    plan = benchmark.quick_plan() if args.quick else benchmark.full_plan()
+def compare_plan(args: argparse.Namespace) -> tuple[benchmark.Plan, str]:
+    """The plan of ``softenv compare`` (its profile, narrowed by the options) and its report's stem."""
+    profile = "quick" if args.quick else "haptic" if args.haptic else "full"
+    plan = {"quick": benchmark.quick_plan, "haptic": benchmark.haptic_plan, "full": benchmark.full_plan}[profile]()
     if args.scenes:
         plan.scenes = args.scenes
         plan.seeds = {s: plan.seeds.get(s, 5 if s in benchmark.FIVE_SEEDS else 3) for s in args.scenes}
@@ -161,15 +158,23 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
         plan.agents = args.agents
     if args.episodes is not None:
         plan.episodes = args.episodes
+    return plan, "benchmark" if profile == "full" else f"benchmark_{profile}"
+
+
+def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
+    if not bench.threads_pinned():
+        bench.reexec_single_threaded(argv)
+    missing = [name for name in ("stable_baselines3", "torch", "matplotlib") if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {missing} missing")
+    plan, stem = compare_plan(args)
     if args.quick:
         print(f"softenv compare --quick: {' and '.join(plan.scenes)} test targets, {plan.episodes} episodes per policy; "
               f"agents trained now on SoftSphere-v0 for "
               f"{', '.join(f'{a} {n:,}' for a, n in plan.timesteps.items())} env steps (1 seed) -- short budgets, not the "
               "full benchmark")
-    benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv),
-                  stem="benchmark_quick" if args.quick else "benchmark", executor=args.executor,
-                  n_jobs=args.jobs if args.jobs is not None else usable_cores(),
-                  retries=args.retries)
+    benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv), stem=stem, executor=args.executor,
+                  n_jobs=args.jobs if args.jobs is not None else usable_cores(), retries=args.retries)
 
 
 def cmd_score(args: argparse.Namespace) -> None:
@@ -281,8 +286,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="cuda: the torch twin on the GPU alone, written to perf-gpu.md (needs a CUDA device)")
 
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
-    p.add_argument("--quick", action="store_true",
-                   help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
+    profile = p.add_mutually_exclusive_group()
+    profile.add_argument("--quick", action="store_true",
+                         help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
+    profile.add_argument("--haptic", action="store_true",
+                         help="the two laryngoscope scenes, every baseline, the four agents at their converged budgets "
+                              "over 3 seeds (report benchmark_haptic.*; HAPTIC_TIME on 2 cores)")
     p.add_argument("--scenes", nargs="+", choices=list(benchmark.SCENES), metavar="SCENE",
                    help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
     p.add_argument("--policies", nargs="*", choices=list(benchmark.BASELINES), metavar="POLICY",

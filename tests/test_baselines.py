@@ -312,3 +312,23 @@ def test_the_baselines_load_without_pymunk(heavy_modules_after):
     imports them, and on a machine without pymunk failed."""
     code = "import baselines.benchmark, baselines.policies, baselines.evaluate, softenv.control\n"
     assert heavy_modules_after(code) == []
+
+
+def test_compare_profiles_name_their_scenes_seeds_budgets_and_report():
+    """`softenv compare`'s profiles: quick, the laryngoscope scenes alone (--haptic) and the full run; the
+    two named profiles exclude each other, and --scenes narrows a profile keeping its seed rule."""
+    from softenv.cli import build_parser, compare_plan
+
+    parser = build_parser()
+    haptic, stem = compare_plan(parser.parse_args(["compare", "--haptic"]))
+    assert stem == "benchmark_haptic"
+    assert haptic.scenes == ["SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0"]
+    assert haptic.seeds == {s: 3 for s in haptic.scenes} and haptic.timesteps == {}      # the YAML budgets
+    assert {"expert", "oracle", "zero"} <= set(haptic.baselines) and haptic.agents == ["ppo", "sac", "td3", "sac-her"]
+    full, stem = compare_plan(parser.parse_args(["compare", "--scenes", "SoftSphereHapticProcedure-v0", "--agents"]))
+    assert stem == "benchmark" and full.scenes == ["SoftSphereHapticProcedure-v0"] and full.agents == []
+    assert full.seeds == {"SoftSphereHapticProcedure-v0": 3}
+    quick, stem = compare_plan(parser.parse_args(["compare", "--quick", "--episodes", "7"]))
+    assert stem == "benchmark_quick" and quick.episodes == 7 and quick.timesteps["ppo"] == 50_000
+    with pytest.raises(SystemExit):
+        parser.parse_args(["compare", "--quick", "--haptic"])
