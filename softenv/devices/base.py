@@ -179,6 +179,11 @@ class DeviceTensors(DeviceNames, Protocol):
         """As :meth:`DeviceBatch.report` (tensors); records nothing for the episode's end."""
         ...
 
+    def compile(self, options: dict[str, Any]) -> bool:
+        """Compile this device's own step with ``torch.compile(**options)`` and return True; or return False,
+        and the env compiles its whole step, this device's work inlined (the twin's ``compile_options``)."""
+        ...
+
 
 @dataclass(frozen=True)
 class DeviceKind:

@@ -13,8 +13,8 @@ observation is float32 like the observation space.
 What it expresses: the tabulated response (``response.model = "exact"``, analytic or FE tissue, any
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
 dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal device, and the
-laryngoscope on float64 tensors, which agrees with the numpy engines to rounding and steps eagerly or
-recorded by ``cuda_graph``, not compiled).
+laryngoscope on float64 tensors, which agrees with the numpy engines to rounding; ``compile_options``
+compiles its substep, not the whole step).
 Not: regressor responses and vertex observations.
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
@@ -64,8 +64,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         target_draw: ``"host"`` (the numpy twin's episodes) or ``"device"`` (no host sync; see above).
         compile_options: ``torch.compile`` arguments (``{"mode": "reduce-overhead"}`` for CUDA graphs):
             the env compiles its step's tensor work (``fullgraph``; two graphs) and keeps its step count
-            and the action check on the host. Needs ``target_draw="device"``. With CUDA graphs a step's
-            outputs live until the next step: clone what you keep.
+            and the action check on the host; a device with a step of its own to compile (the
+            laryngoscope: its substep, run 20 times a step) compiles that alone and the env's work stays
+            eager. Needs ``target_draw="device"``. With CUDA graphs a step's outputs live until the next
+            step: clone what you keep.
         cuda_graph: record the step's tensor work (eager, or compiled by ``compile_options`` in a mode
             without CUDA graphs) as CUDA graphs the env replays itself (:mod:`softenv.envs.torch_graph`):
             a step's host work is then one copy of the actions and one graph launch, without dynamo's and
@@ -107,9 +109,6 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if kind.tensors is None:
             raise ValueError(f"device.kind={world.config['device']['kind']!r} has no tensor form (its DeviceKind's "
                              "tensors is None): the torch backend steps 'ideal' and 'laryngoscope'; use backend='numpy'")
-        if kind.name != "ideal" and compile_options is not None:
-            raise ValueError(f"compile_options={compile_options!r}: compiling the step covers device.kind='ideal'; "
-                             f"the {kind.name!r} device steps eagerly (leave it unset; cuda_graph=True records it)")
         table = world.scene.response
         if not isinstance(table, TabulatedResponse):
             raise ValueError(f"response.model={world.config['response']['model']!r}: the torch backend expresses the "
@@ -144,7 +143,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
         # the tensor work of a step, compiled when compile_options asks, recorded when cuda_graph asks
-        work = (self._step_tensors if compile_options is None
+        # a device with a compiled step of its own (the laryngoscope's substep) leaves the env's work eager
+        work = (self._step_tensors if compile_options is None or self._device.compile(compile_options)
                 else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
         self._tensor_work = GraphedStep(work, self._prev) if cuda_graph else work
         if self.torch_device.type == "cuda":

@@ -27,6 +27,7 @@ from .space import COLLISION_SLOP, SOLVER_ITERATIONS, DeviceSpace, DeviceState, 
 
 
 Vec3 = tuple[Any, Any, Any]       # x, y and angular components, one entry a device
+Vec4 = tuple[Any, Any, Any, Any]
 
 
 class ArrayLaryngoscopes(LaryngoscopeBase):
@@ -82,33 +83,42 @@ class ArrayLaryngoscopes(LaryngoscopeBase):
         self.substeps(vX, vY, spin, v_lat, self.n_substeps)
 
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
-        xp, ops = self.xp, self.ops
+        xp = self.xp
         self._flush(self._touched)
         self._touched = xp.zeros_like(self._touched)
-        c, h = self.c, self.h
-        lo, hi = c.low, c.high
-        lat_y, lat_v, hand_lat, anchor = (self._own(col) for col in self._lateral.T)
+        lateral = tuple(self._own(col) for col in self._lateral.T)
         impulse = xp.zeros_like(self._incisor)
-        loads, slopes = self._loads, self._slopes
         for _ in range(count):
-            bodies = self._bodies()
-            gx, gy, pitch = bodies[:, 0, 0], bodies[:, 0, 1], bodies[:, 0, 2]
-            px, py, a, vx, vy, w = bodies[:, 1].T
-            hvx = ops.clip(vX, (lo[0] - gx) / h, (hi[0] - gx) / h)
-            hvy = ops.clip(vY, (lo[1] - gy) / h, (hi[1] - gy) / h)
-            hw = ops.clip(spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h)
-            hl = ops.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
-            hand_lat = hand_lat + h * hl
-            ca, sa = ops.cos(a), ops.sin(a)
-            fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
-                (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-                loads, slopes, c, ops)
-            self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
-        self._lateral = xp.stack([lat_y, lat_v, hand_lat, anchor], axis=1)
-        self._hand_v = xp.stack([hvx, hvy, hw, hl], axis=1)
-        self._contact = xp.stack([P, Q, cx, cy], axis=1)
-        self._incisor = impulse / (count * h)
+            lateral, hand_v, contact = self._substep((vX, vY, spin, v_lat), lateral, impulse)
+        self._lateral = xp.stack(lateral, axis=1)
+        self._hand_v = xp.stack(hand_v, axis=1)
+        self._contact = xp.stack(contact, axis=1)
+        self._incisor = impulse / (count * self.h)
         self._forget()
+
+    def _substep(self, command: Vec4, lateral: Vec4, impulse: Any) -> tuple[Vec4, Vec4, Vec4]:
+        """One substep: the hands commanded to ``command`` (x, y, pitch and lateral velocity, within the
+        workspace), the tongue's contact and lateral sweep from ``lateral`` (y, velocity, hand's lateral
+        position, anchor), the blades and hands advanced (incisor impulses added to ``impulse``). Returns
+        the new lateral state, the hands' velocities and the tongue contact (P, Q, cx, cy)."""
+        ops, c, h = self.ops, self.c, self.h
+        lo, hi = c.low, c.high
+        vX, vY, spin, v_lat = command
+        lat_y, lat_v, hand_lat, anchor = lateral
+        bodies = self._bodies()
+        gx, gy, pitch = bodies[:, 0, 0], bodies[:, 0, 1], bodies[:, 0, 2]
+        px, py, a, vx, vy, w = bodies[:, 1].T
+        hvx = ops.clip(vX, (lo[0] - gx) / h, (hi[0] - gx) / h)
+        hvy = ops.clip(vY, (lo[1] - gy) / h, (hi[1] - gy) / h)
+        hw = ops.clip(spin, (lo[2] - pitch) / h, (hi[2] - pitch) / h)
+        hl = ops.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
+        hand_lat = hand_lat + h * hl
+        ca, sa = ops.cos(a), ops.sin(a)
+        fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
+            (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
+            self._loads, self._slopes, c, ops)
+        self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
+        return (lat_y, lat_v, hand_lat, anchor), (hvx, hvy, hw, hl), (P, Q, cx, cy)
 
     def features(self) -> tuple[Any, Any]:
         """Force features ``(n, 4)`` of the contacts and a mask of the devices in contact."""

@@ -179,10 +179,12 @@ class Arbiters:
 
     @classmethod
     def none(cls, n: int, xp: Any = np, device: Any = "cpu") -> Arbiters:
+        # a normal from the start (read, masked, by devices without contact), so no step branches on its absence
         return cls(xp.zeros(n, dtype=xp.bool, device=device), xp.zeros(n, dtype=xp.int64, device=device),
                    xp.zeros((n, 2), dtype=xp.bool, device=device),
                    xp.full((n, 2, 2), -1, dtype=xp.int64, device=device),
-                   xp.zeros((n, 2), dtype=xp.float64, device=device), xp.zeros((n, 2), dtype=xp.float64, device=device))
+                   xp.zeros((n, 2), dtype=xp.float64, device=device), xp.zeros((n, 2), dtype=xp.float64, device=device),
+                   normal=xp.zeros((n, 2), dtype=xp.float64, device=device))
 
     def drop(self, mask: Any, xp: Any) -> None:
         """Drop the masked devices' arbiters (as the pymunk space's flush does)."""
@@ -263,7 +265,7 @@ def prestep(arb: Arbiters, s: Solver, px: Any, py: Any, cos_a: Any, sin_a: Any, 
     arb.exists = xp.where(kept, exists, arb.exists)
     arb.features = xp.where(kept[..., None], features, arb.features)
     arb.jn, arb.jt = xp.where(kept, jn, arb.jn), xp.where(kept, jt, arb.jt)
-    arb.normal = xp.where(kept, normal, arb.normal if arb.normal is not None else normal)
+    arb.normal = xp.where(kept, normal, arb.normal)
     n = arb.normal
     r1 = on_segment - 0.0                                # the static body sits at the origin
     r2 = on_blade - xp.stack([px, py], axis=1)[:, None, :]
