@@ -52,7 +52,7 @@ FORMAT_VERSION = 2                # 2: the seed and budget it was trained with
 
 @dataclass
 class Args:
-    scene: str = "SoftSphere-v0"             # an ideal-device benchmark scene (baselines.evaluate.SCENES)
+    scene: str = "SoftSphere-v0"             # a benchmark scene (baselines.evaluate.SCENES)
     seed: int = 0
     device: str = "cpu"
     target_draw: str = "device"              # where training targets are drawn: "device" or "host"
@@ -71,7 +71,8 @@ class Args:
     max_grad_norm: float = 0.5
     log_std_init: float = -1.0
     normalize_obs: bool = True               # running mean/std of observations (CleanRL's wrapper)
-    compile_env: bool = False                # the env compiles its step: CUDA graphs on a GPU (compiling takes 10-30 s)
+    compile_env: bool = False                # the env compiles its step (the laryngoscope: its substep), recorded as
+                                             # CUDA graphs on a GPU; compiling takes 10-30 s (laryngoscope: 1-3 min)
     hidden: list[int] = field(default_factory=lambda: [64, 64])
 
 
