@@ -14,6 +14,7 @@ import csv
 import inspect
 import json
 import platform
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -449,11 +450,11 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)
-    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(6, max(len(handles), 1)), fontsize=7,
-               frameon=False)
-    fig.tight_layout(rect=(0, 0.04 + 0.025 * (len(handles) // 6 + 1), 1, 0.95))
-    fig.suptitle(f"final shape error against decision time (mean, 95 % interval; errors under {ERROR_FLOOR_MM * 1e3:g} um "
-                 f"drawn as a triangle at {ERROR_FLOOR_MM * 1e3:g} um)\n{command}", fontsize=7)
+    ncol = _legend_columns(fig, len(handles))
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=ncol, fontsize=7, frameon=False)
+    _suptitle(fig, f"final shape error against decision time (mean, 95 % interval; errors under "
+                   f"{ERROR_FLOOR_MM * 1e3:g} um drawn as a triangle at {ERROR_FLOOR_MM * 1e3:g} um)", command)
+    fig.tight_layout(rect=(0, _legend_room(fig, len(handles), ncol), 1, 1))
     return [(out_dir / _error_plot_name(stem), fig),
             (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
             (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
@@ -508,11 +509,31 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
     seeds = {algo: max((len(curves.get((s, algo), [])) for s in scenes), default=0) for algo in plan.agents}
     handles = [plt.Line2D([], [], color=colours[a], label=f"{a} ({seeds[a]} seed{'s' if seeds[a] != 1 else ''})")
                for a in plan.agents if seeds[a]]
+    ncol = _legend_columns(fig, len(handles))
     if handles:
-        fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 5), fontsize=7, frameon=False)
-    fig.tight_layout(rect=(0, 0.06 if handles else 0, 1, 0.93))
-    fig.suptitle(f"learning curves (mean, 95 % band over seeds)\n{command}", fontsize=7)
+        fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
+    _suptitle(fig, "learning curves (mean, 95 % band over seeds)", command)
+    fig.tight_layout(rect=(0, _legend_room(fig, len(handles), ncol), 1, 1))
     return fig
+
+
+def _legend_columns(fig: Any, entries: int) -> int:
+    """Columns of a legend below the panels: as many entries a row as fit the figure's width (1.6 in each)."""
+    return max(1, min(entries, int(fig.get_figwidth() / 1.6)))
+
+
+def _legend_room(fig: Any, entries: int, ncol: int) -> float:
+    """The figure fraction a legend of ``entries`` in ``ncol`` columns takes below the panels."""
+    rows = -(-entries // ncol) if entries else 0
+    return (rows * 7 * 1.8 + (8 if rows else 0)) / (fig.get_figheight() * 72)
+
+
+def _suptitle(fig: Any, text: str, command: str, fontsize: float = 7) -> None:
+    """``text`` and the command that made the figure as its title, wrapped to its width (a long command is
+    not cut off at the edges); tight and constrained layouts make room for it."""
+    width = max(20, int(fig.get_figwidth() * 72 / (0.55 * fontsize)))    # characters a line at this size
+    lines = textwrap.wrap(text, width) + textwrap.wrap(command, width, break_on_hyphens=False)
+    fig.suptitle("\n".join(lines), fontsize=fontsize)
 
 
 def _gallery(command: str, plt: Any) -> Any:
@@ -535,6 +556,6 @@ def _gallery(command: str, plt: Any) -> Any:
         ax.axis("off")
         env.close()
     displacement_colorbar(fig, axes, world.scene.tissue.radius, orientation="horizontal", shrink=0.4, aspect=40)
-    fig.suptitle(f"final shape (colour) and target (blue wireframe), one test episode of SoftSphere-v0, with its final "
-                 f"shape error\n{command}", fontsize=6)
+    _suptitle(fig, "final shape (colour) and target (blue wireframe), one test episode of SoftSphere-v0, with its final "
+              "shape error", command, fontsize=6)
     return fig
