@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import Plan, run
+from baselines.benchmark import Plan, format_seeds, run
 from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
@@ -149,6 +149,11 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     quiet = lambda s: None  # noqa: E731
     whole = run(plan, tmp_path, tmp_path / "whole", "test", echo=quiet, write=False)
     assert whole[2]["kind"] == "agent (1,100 steps)"
+    # each seed's mean score beside the pooled one: 4 episodes a seed, so the pooled mean is their mean
+    assert len(whole[2]["seed_scores"]) == 2 and whole[2]["seed_scores"][0] != whole[2]["seed_scores"][1]
+    assert np.mean(whole[2]["seed_scores"]) == pytest.approx(whole[2]["normalized_score"]["mean"], rel=1e-12)
+    table = format_seeds(whole).splitlines()
+    assert table[0] == "| scene | policy | seed 0 | seed 1 |" and table[2].startswith("| SoftSphere-v0 | sac | ")
     save = RunStore.save
 
     def stop_after_two(self, job, result):        # SIGTERM arrives as the third job finishes, before it is kept
