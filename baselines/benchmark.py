@@ -243,8 +243,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             else:
                 budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
                 what = f"{budget:,} steps"
-            seed_scores = [float(np.mean(anchored(r.value[0]).values["normalized_score"])) if r.ok else None
-                           for r in runs]
+            seed_scores = [anchored(r.value[0]).summary()["normalized_score"] if r.ok else None for r in runs]
             summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done), seed_scores=seed_scores))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
@@ -347,12 +346,13 @@ def format_clinical(summaries: list[dict[str, Any]]) -> str:
 
 
 def format_seeds(summaries: list[dict[str, Any]]) -> str:
-    """Each agent's mean normalized score by training seed (a seed that learned apart from the others shows)."""
+    """Each agent's normalized score by training seed, mean [95 % interval] over its test episodes (a seed
+    that learned apart from the others shows)."""
     agents = [s for s in summaries if "seed_scores" in s]
     width = max((len(s["seed_scores"]) for s in agents), default=0)
     lines = ["| scene | policy | " + " | ".join(f"seed {i}" for i in range(width)) + " |", "|" + "---|" * (width + 2)]
     for s in agents:
-        cells = ["failed" if v is None else f"{v:.1f}" for v in s["seed_scores"]] + ["-"] * (width - len(s["seed_scores"]))
+        cells = ["failed" if v is None else _fmt(v, 1) for v in s["seed_scores"]] + ["-"] * (width - len(s["seed_scores"]))
         lines.append("| " + " | ".join([s["scene"], s["policy"], *cells]) + " |")
     return "\n".join(lines)
 
@@ -408,8 +408,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           format_table(summaries), "",
           *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),
-          *(["Agents by training seed (normalized score, mean over the test episodes; the table above pools the "
-             "seeds' episodes):\n", format_seeds(summaries), ""] if any("seed_scores" in s for s in summaries) else []),
+          *(["Agents by training seed (normalized score, mean [95 % bootstrap interval] over each seed's test "
+             "episodes; the table above pools them):\n", format_seeds(summaries), ""]
+            if any("seed_scores" in s for s in summaries) else []),
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times), "
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
     if failed:

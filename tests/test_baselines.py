@@ -150,8 +150,10 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     whole = run(plan, tmp_path, tmp_path / "whole", "test", echo=quiet, write=False)
     assert whole[2]["kind"] == "agent (1,100 steps)"
     # each seed's mean score beside the pooled one: 4 episodes a seed, so the pooled mean is their mean
-    assert len(whole[2]["seed_scores"]) == 2 and whole[2]["seed_scores"][0] != whole[2]["seed_scores"][1]
-    assert np.mean(whole[2]["seed_scores"]) == pytest.approx(whole[2]["normalized_score"]["mean"], rel=1e-12)
+    seeds = whole[2]["seed_scores"]
+    assert len(seeds) == 2 and seeds[0]["mean"] != seeds[1]["mean"] and all(s["n"] == 4 for s in seeds)
+    assert np.mean([s["mean"] for s in seeds]) == pytest.approx(whole[2]["normalized_score"]["mean"], rel=1e-12)
+    assert all(s["ci_low"] <= s["mean"] <= s["ci_high"] for s in seeds)
     table = format_seeds(whole).splitlines()
     assert table[0] == "| scene | policy | seed 0 | seed 1 |" and table[2].startswith("| SoftSphere-v0 | sac | ")
     save = RunStore.save
