@@ -58,11 +58,10 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
         holders = [(self, name) for name in self._STATE] + [(arbiters, name) for name in self._ARBITER_STATE]
         for holder, name in holders:
             value = getattr(holder, name)
-            if value is not None:
-                home = self._homes.setdefault((type(holder).__name__, name), value.clone())
-                if home is not value:
-                    home.copy_(value)
-                    setattr(holder, name, home)
+            home = self._homes.setdefault((type(holder).__name__, name), value.clone())   # a clone: no two share one
+            if home is not value:
+                home.copy_(value)
+                setattr(holder, name, home)
         homes = [self._homes.setdefault(("bias", str(i)), b.clone()) for i, b in enumerate(self._teeth.bias)]
         for home, value in zip(homes, self._teeth.bias):
             if home is not value:
