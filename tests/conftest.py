@@ -1,4 +1,4 @@
-"""Test set-up: one BLAS/torch thread (2-core CI machines) and an isolated cache directory."""
+"""Test set-up: one BLAS/torch thread (2-core CI machines, one test process a core) and an isolated cache directory."""
 
 import collections
 import os
@@ -7,6 +7,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECL
     os.environ.setdefault(_var, "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import shutil  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
@@ -21,8 +22,12 @@ settings.register_profile("ci", max_examples=60, **_COMMON)
 settings.register_profile("long", max_examples=1_000, **_COMMON)
 settings.load_profile(os.environ.get("SOFTENV_HYPOTHESIS_PROFILE", "ci"))
 
-_CACHE = tempfile.mkdtemp(prefix="softenv-test-cache-")
-os.environ["SOFTENV_CACHE_DIR"] = _CACHE
+# one cache a test run, made by the first pytest process and inherited by pytest -n's workers (writes are atomic);
+# the process that made it removes it at the end
+_OWNS_CACHE = "SOFTENV_TEST_RUN_CACHE" not in os.environ
+if _OWNS_CACHE:
+    os.environ["SOFTENV_TEST_RUN_CACHE"] = tempfile.mkdtemp(prefix="softenv-test-cache-")
+_CACHE = os.environ["SOFTENV_CACHE_DIR"] = os.environ["SOFTENV_TEST_RUN_CACHE"]
 
 try:  # torch is an optional extra; when present, keep it to one thread as well
     import torch
@@ -34,6 +39,11 @@ except ImportError:  # pragma: no cover
 
 # cases tried per input class (scripts/stability.py runs the hostile-input tests and tabulates these)
 TRIED: "collections.Counter[str]" = collections.Counter()
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    if _OWNS_CACHE:
+        shutil.rmtree(_CACHE, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

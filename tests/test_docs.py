@@ -24,6 +24,18 @@ def test_ci_runs_the_readme_test_command():
     assert readme_commands()[1] in ci.splitlines()
 
 
+def test_the_docs_show_the_readmes_setup_commands_and_every_extra():
+    """docs/getting-started.md repeats the README's two commands word for word, and both name every extra."""
+    import tomllib
+
+    started = (ROOT / "docs" / "getting-started.md").read_text()
+    assert all(command in started.splitlines() for command in readme_commands())
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    readme = (ROOT / "README.md").read_text()
+    for extra in extras:
+        assert f"`{extra}`" in readme and f"`{extra}`" in started, extra
+
+
 def test_constraints_pin_the_cpu_torch():
     lines = [line.strip() for line in (ROOT / "constraints.txt").read_text().splitlines()]
     assert "torch==2.13.0" in lines
