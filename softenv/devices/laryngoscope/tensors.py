@@ -55,18 +55,18 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
         """Copy the state the engine's code left in new tensors into the tensors that held it (one home
         for each, made at the first call), and point at those: the next step reads where this one wrote."""
         arbiters = self._teeth.arbiters
-        holders = [(self, name) for name in self._STATE] + [(arbiters, name) for name in self._ARBITER_STATE]
-        for holder, name in holders:
-            value = getattr(holder, name)
-            home = self._homes.setdefault((type(holder).__name__, name), value.clone())   # a clone: no two share one
-            if home is not value:
-                home.copy_(value)
-                setattr(holder, name, home)
-        homes = [self._homes.setdefault(("bias", str(i)), b.clone()) for i, b in enumerate(self._teeth.bias)]
-        for home, value in zip(homes, self._teeth.bias):
-            if home is not value:
-                home.copy_(value)
-        self._teeth.bias = homes
+        for holder, name in [(self, name) for name in self._STATE] + [(arbiters, name) for name in self._ARBITER_STATE]:
+            setattr(holder, name, self._home((type(holder).__name__, name), getattr(holder, name)))
+        self._teeth.bias = [self._home(("bias", str(i)), b) for i, b in enumerate(self._teeth.bias)]
+
+    def _home(self, key: tuple[str, str], value: torch.Tensor) -> torch.Tensor:
+        """``value`` copied into the tensor kept for ``key`` (a clone of the first value: no two share one)."""
+        home = self._homes.get(key)
+        if home is None:
+            home = self._homes[key] = value.clone()
+        elif home is not value:
+            home.copy_(value)
+        return home
 
     def _array(self, value: Any) -> torch.Tensor:
         if isinstance(value, torch.Tensor):
