@@ -441,13 +441,22 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt                         # the viz extra
 
+    return [(out_dir / _error_plot_name(stem), _error_plot(summaries, plan.scenes, command, plt)),
+            (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
+            (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
+
+
+def _error_plot(summaries: list[dict[str, Any]], scenes: list[str], command: str, plt: Any) -> Any:
+    """Final shape error against decision time, one log-log panel per scene."""
     # one panel per scene in a grid; every policy keeps its colour and marker across panels, and the
     # names sit in one legend below the grid (point labels would overlap where policies agree)
-    fig, axes = _grid(plt, len(plan.scenes), legend_room=1.2)
+    fig, axes = _grid(plt, len(scenes), legend_room=1.2)
     names = list(dict.fromkeys(s["policy"] for s in summaries))
     colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
     markers = "osD^v<>ph*"
-    for ax, scene in zip(axes.flat, plan.scenes):
+    for ax, scene in zip(axes.flat, scenes):
+        lowest = min((max(s["final_error_mm"]["ci_low"], ERROR_FLOOR_MM) for s in summaries if s["scene"] == scene),
+                     default=ERROR_FLOOR_MM)
         for s in (s for s in summaries if s["scene"] == scene):
             e, i = s["final_error_mm"], names.index(s["policy"])
             x = max(s["decision_us"], 0.5)
@@ -458,7 +467,7 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
                         fmt=markers[i % len(markers)], color=colours[i], ms=5, capsize=2, label=s["policy"])
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_ylim(bottom=0.7 * ERROR_FLOOR_MM)
+        ax.set_ylim(bottom=0.7 * lowest)            # down to the floor only where a policy reaches it
         ax.set_xlabel("decision time per step (us)")
         ax.set_ylabel("final shape error (mm)")
         ax.set_title(scene, fontsize=8)
@@ -471,9 +480,7 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     _suptitle(fig, f"final shape error against decision time (mean, 95 % interval; errors under "
                    f"{ERROR_FLOOR_MM * 1e3:g} um drawn as a triangle at {ERROR_FLOOR_MM * 1e3:g} um)", command)
     fig.tight_layout(rect=(0, _legend_room(fig, len(handles), ncol), 1, 1))
-    return [(out_dir / _error_plot_name(stem), fig),
-            (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
-            (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
+    return fig
 
 
 def _grid(plt: Any, panels: int, legend_room: float = 0.0) -> tuple[Any, np.ndarray]:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import Plan, format_seeds, run
+from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, format_seeds, run
 from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
@@ -221,6 +221,23 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
     assert f"at {code_revision()} (" in csv_text.splitlines()[0]        # the code that made it, by commit
     for name in ("policy_error_vs_runtime.png", "benchmark_learning_curves.png", "benchmark_gallery.png"):
         assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_the_error_axis_reaches_the_floor_only_where_a_policy_does():
+    """A panel whose errors are all far above 1 um starts just below its lowest interval; one with the
+    oracle's near-zero error starts below the floor, where that point is drawn."""
+    import matplotlib.pyplot as plt
+
+    def row(scene: str, policy: str, mean: float) -> dict:
+        return {"scene": scene, "policy": policy, "decision_us": 100.0,
+                "final_error_mm": {"mean": mean, "ci_low": 0.8 * mean, "ci_high": 1.2 * mean}}
+
+    summaries = [row("A", "oracle", 1e-7), row("A", "zero", 2.8), row("B", "expert", 0.1), row("B", "zero", 2.8)]
+    fig = _error_plot(summaries, ["A", "B"], "softenv compare --test", plt)
+    (a, b) = fig.axes[:2]
+    assert a.get_ylim()[0] == pytest.approx(0.7 * ERROR_FLOOR_MM)
+    assert b.get_ylim()[0] == pytest.approx(0.7 * 0.08)
+    plt.close(fig)
 
 
 def test_every_baseline_acts_within_the_box(world):
