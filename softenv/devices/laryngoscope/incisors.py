@@ -3,13 +3,15 @@
 The second piece of the laryngoscope on arrays (issue 37, after :mod:`.rigid`): Chipmunk's
 ``SegmentToPoly`` for the incisors (a static rounded segment) and the blade (a convex polygon without
 radius), without its iterative search. Chipmunk finds the edge of the Minkowski difference
-``blade - incisors`` nearest the origin by GJK; while the two cores are apart (the blade never sinks
-the incisors' 4 mm radius deep) that edge is the nearest of the difference's candidate edges, each
-vertex of one shape against each edge of the other, so every candidate is measured at once and the
-nearest taken. Its closest points, normal and distance, then the contact points clipped from the two
-support edges, follow Chipmunk's expressions (``ClosestPointsNew``, ``SupportEdgeFor*``,
-``ContactPoints``), so the same IEEE operations run in the same order
-(``tests/test_laryngoscope_arrays.py`` holds them to Chipmunk's ``cpShapesCollide``, bit for bit).
+``blade - incisors`` nearest the origin: by GJK while the two cores are apart (the blade less than the
+incisors' 4 mm radius into them), where that edge is the nearest of the difference's candidate edges
+(each vertex of one shape against each edge of the other); by EPA once the cores overlap (a fast blade
+sinks deeper in one substep), where it is the nearest edge of the difference's hull. Every candidate is
+measured at once and the nearest taken, among the hull's edges alone when the origin lies inside it. Its
+closest points, normal and distance, then the contact points clipped from the two support edges, follow
+Chipmunk's expressions (``ClosestPointsNew``, ``SupportEdgeFor*``, ``ContactPoints``), so the same IEEE
+operations run in the same order (``tests/test_laryngoscope_arrays.py`` holds them to Chipmunk's
+``cpShapesCollide``, bit for bit, apart and sunk).
 
 The contact's solver follows ``cpArbiter``: each device's arbiter (:class:`Arbiters`) keeps its
 contacts' accumulated impulses from step to step, matched by the features they join, and outlives its
@@ -93,12 +95,18 @@ def collide(s: Solver, vertices: Any, normals: Any, xp: Any) -> tuple[Any, Any, 
     v1 = xp.concat([xp.reshape(xp.roll(ab, -1, axis=2), (n_dev, 2 * count, 2)), ab[:, 1]], axis=1)
     t_all = _closest_t(v0, v1, xp)
     p_all = _lerp_t(v0, v1, t_all)
-    best = xp.argmin(_dot(p_all, p_all), axis=1)                      # ClosestDist; the first of equals
+    left, inside = _hull_sides(v0, v1, xp.reshape(ab, (n_dev, 2 * count, 2)), xp)
+    # apart, the nearest candidate is where GJK ends; sunk deeper than the radius (the cores overlap, the
+    # origin inside the difference), EPA ends on the nearest edge of the hull: candidates inside it are out
+    dist = _dot(p_all, p_all)
+    best = xp.argmin(xp.where(inside[:, None] & (left == 0), xp.inf, dist), axis=1)      # the first of equals
     rows = xp.arange(n_dev, device=vertices.device)
-    # Chipmunk's GJK leaves the edge oriented with the origin on its inner side: d > 0 apart
+    # either way the edge is oriented with the hull on its inner side (rperp points into it): d > 0 apart,
+    # d < 0 sunk
     e0, e1 = _pick(v0, rows, best), _pick(v1, rows, best)
     delta = e1 - e0
-    flip = _dot(xp.stack([delta[:, 1], -delta[:, 0]], axis=1), _pick(p_all, rows, best)) < 0.0
+    outward = _dot(xp.stack([delta[:, 1], -delta[:, 0]], axis=1), _pick(p_all, rows, best)) < 0.0
+    flip = xp.where(inside, _pick(left, rows, best) == 1, outward)
     m0 = ab[rows, xp.where(flip, ib[best], ia[best]), xp.where(flip, jb[best], ja[best])]
     m1 = ab[rows, xp.where(flip, ia[best], ib[best]), xp.where(flip, ja[best], jb[best])]
     # ClosestPointsNew
@@ -142,6 +150,18 @@ def collide(s: Solver, vertices: Any, normals: Any, xp: Any) -> tuple[Any, Any, 
         points_b.append(p2)
         exists.append(touching & (_dot(p2 - p1, normal) <= 0.0))
     return normal, xp.stack(points_a, axis=1), xp.stack(points_b, axis=1), xp.stack(exists, axis=1), features
+
+
+def _hull_sides(v0: Any, v1: Any, points: Any, xp: Any) -> tuple[Any, Any]:
+    """For each candidate edge ``v0 -> v1`` ``(n, E, 2)`` of the difference whose points are ``points``
+    ``(n, P, 2)``: which side of it they all lie on (1 left, -1 right, 0 both: not a hull edge), and for
+    each device whether the origin lies strictly inside the hull (the cores overlap)."""
+    edge = v1 - v0
+    side = _cross(edge[:, :, None, :], points[:, None, :, :] - v0[:, :, None, :])
+    left = xp.where(xp.all(side >= 0.0, axis=2), 1, xp.where(xp.all(side <= 0.0, axis=2), -1, 0))
+    origin = _cross(edge, -v0)
+    inner = ((left == 1) & (origin > 0.0)) | ((left == -1) & (origin < 0.0)) | (left == 0)
+    return left, xp.all(inner, axis=1)
 
 
 def segment_normal(ends: np.ndarray) -> np.ndarray:

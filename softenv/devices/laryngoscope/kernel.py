@@ -86,6 +86,43 @@ def _separated(ends: np.ndarray, radius: float, vw: np.ndarray, nw: np.ndarray) 
     return False
 
 
+@numba.njit(inline="always")
+def _candidate(k: int, count: int) -> tuple[int, int, int, int]:
+    """Candidate edge ``k`` of the difference: (segment end, blade vertex) at its start and its end."""
+    if k < 2 * count:
+        return k // count, k % count, k // count, (k % count + 1) % count
+    return 0, k - 2 * count, 1, k - 2 * count
+
+
+@numba.njit(inline="always")
+def _hull_side(ax: float, ay: float, bx: float, by: float, ends: np.ndarray, vw: np.ndarray) -> int:
+    """:func:`.incisors._hull_sides` for the edge ``a -> b``: 1 (every point of the difference on its left),
+    -1 (right) or 0 (points on both sides: not a hull edge)."""
+    ex, ey = bx - ax, by - ay
+    left = right = True
+    for i in range(2):
+        for j in range(vw.shape[0]):
+            side = ex * ((vw[j, 1] - ends[i, 1]) - ay) - ey * ((vw[j, 0] - ends[i, 0]) - ax)
+            left &= side >= 0.0
+            right &= side <= 0.0
+    return 1 if left else (-1 if right else 0)
+
+
+@numba.njit
+def _cores_overlap(ends: np.ndarray, vw: np.ndarray) -> bool:
+    """Whether the origin lies strictly inside the difference's hull (:func:`.incisors._hull_sides`)."""
+    count = vw.shape[0]
+    for k in range(3 * count):
+        ia, ja, ib, jb = _candidate(k, count)
+        ax, ay = vw[ja, 0] - ends[ia, 0], vw[ja, 1] - ends[ia, 1]
+        bx, by = vw[jb, 0] - ends[ib, 0], vw[jb, 1] - ends[ib, 1]
+        left = _hull_side(ax, ay, bx, by, ends, vw)
+        origin = (bx - ax) * -ay - (by - ay) * -ax
+        if (left == 1 and not origin > 0.0) or (left == -1 and not origin < 0.0):
+            return False
+    return True
+
+
 @numba.njit
 def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.ndarray, nw: np.ndarray,
              out: np.ndarray, feat: np.ndarray) -> tuple[float, float, bool, bool]:
@@ -93,23 +130,24 @@ def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.nda
     the two contacts' points on the segment and on the blade to ``out`` ``(2, 4)`` and their features
     to ``feat`` ``(2, 2)``; returns the normal and which contacts exist."""
     count = vw.shape[0]
-    best_d, best_px, best_py, e_dx, e_dy = np.inf, 0.0, 0.0, 0.0, 0.0
+    inside = _cores_overlap(ends, vw)
+    best_d, best_px, best_py, e_dx, e_dy, best_left = np.inf, 0.0, 0.0, 0.0, 0.0, 0
     best_ia = best_ja = best_ib = best_jb = 0
     for k in range(3 * count):
-        if k < 2 * count:
-            ia, ja, ib, jb = k // count, k % count, k // count, (k % count + 1) % count
-        else:
-            ia, ja, ib, jb = 0, k - 2 * count, 1, k - 2 * count
+        ia, ja, ib, jb = _candidate(k, count)
         ax, ay = vw[ja, 0] - ends[ia, 0], vw[ja, 1] - ends[ia, 1]
         bx, by = vw[jb, 0] - ends[ib, 0], vw[jb, 1] - ends[ib, 1]
+        left = _hull_side(ax, ay, bx, by, ends, vw) if inside else 0
+        if inside and left == 0:                         # inside the hull: not where EPA ends
+            continue
         t = _closest_t(ax, ay, bx, by)
         px, py = _lerp_t(ax, ay, bx, by, t)
         d = px * px + py * py
         if d < best_d:                                   # the first of equals, as argmin
-            best_d, best_px, best_py = d, px, py
+            best_d, best_px, best_py, best_left = d, px, py, left
             best_ia, best_ja, best_ib, best_jb = ia, ja, ib, jb
             e_dx, e_dy = bx - ax, by - ay
-    flip = e_dy * best_px + -e_dx * best_py < 0.0
+    flip = best_left == 1 if inside else e_dy * best_px + -e_dx * best_py < 0.0
     i0, j0, i1, j1 = (best_ib, best_jb, best_ia, best_ja) if flip else (best_ia, best_ja, best_ib, best_jb)
     m0x, m0y = vw[j0, 0] - ends[i0, 0], vw[j0, 1] - ends[i0, 1]
     m1x, m1y = vw[j1, 0] - ends[i1, 0], vw[j1, 1] - ends[i1, 1]
