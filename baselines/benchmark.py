@@ -497,6 +497,12 @@ def _error_plot_name(stem: str) -> str:
     return "policy_error_vs_runtime.png" if stem == "benchmark" else f"{stem}_error_vs_runtime.png"
 
 
+def agent_colours(agents: list[str], plt: Any) -> dict[str, Any]:
+    """One colour per agent in every report, whichever agents a plan trains."""
+    known = [*ALGOS, TORCH_PPO]
+    return {algo: plt.get_cmap("tab10").colors[known.index(algo) % 10] for algo in agents}
+
+
 def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
                      command: str, plt: Any) -> Any:
     """Test-target return against env steps, one panel per scene that trained agents; each agent one
@@ -505,7 +511,7 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
 
     scenes = [scene for scene in plan.scenes if any(curves.get((scene, algo)) for algo in plan.agents)]
     fig, axes = _grid(plt, max(len(scenes), 1), legend_room=0.6)
-    colours = dict(zip(plan.agents, plt.get_cmap("tab10").colors))
+    colours = agent_colours(plan.agents, plt)
     for ax, scene in zip(axes.flat, scenes):
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, format_seeds, run
+from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, agent_colours, format_seeds, run
 from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
@@ -238,6 +238,14 @@ def test_the_error_axis_reaches_the_floor_only_where_a_policy_does():
     assert a.get_ylim()[0] == pytest.approx(0.7 * ERROR_FLOOR_MM)
     assert b.get_ylim()[0] == pytest.approx(0.7 * 0.08)
     plt.close(fig)
+
+
+def test_an_agent_keeps_its_colour_in_every_report():
+    import matplotlib.pyplot as plt
+
+    four, three = agent_colours(["ppo", "sac", "td3", "sac-her"], plt), agent_colours(["sac", "td3", "sac-her"], plt)
+    assert all(three[algo] == four[algo] for algo in three)
+    assert len({four[algo] for algo in four}) == 4
 
 
 def test_every_baseline_acts_within_the_box(world):
