@@ -109,14 +109,15 @@ def _hull_side(ax: float, ay: float, bx: float, by: float, ends: np.ndarray, vw:
 
 
 @numba.njit
-def _cores_overlap(ends: np.ndarray, vw: np.ndarray) -> bool:
-    """Whether the origin lies strictly inside the difference's hull (:func:`.incisors._hull_sides`)."""
+def _cores_overlap(ends: np.ndarray, vw: np.ndarray, sides: np.ndarray) -> bool:
+    """Whether the origin lies strictly inside the difference's hull (:func:`.incisors._hull_sides`); when
+    it does, every candidate's :func:`_hull_side` is left in ``sides``."""
     count = vw.shape[0]
     for k in range(3 * count):
         ia, ja, ib, jb = _candidate(k, count)
         ax, ay = vw[ja, 0] - ends[ia, 0], vw[ja, 1] - ends[ia, 1]
         bx, by = vw[jb, 0] - ends[ib, 0], vw[jb, 1] - ends[ib, 1]
-        left = _hull_side(ax, ay, bx, by, ends, vw)
+        left = sides[k] = _hull_side(ax, ay, bx, by, ends, vw)
         origin = (bx - ax) * -ay - (by - ay) * -ax
         if (left == 1 and not origin > 0.0) or (left == -1 and not origin < 0.0):
             return False
@@ -125,19 +126,20 @@ def _cores_overlap(ends: np.ndarray, vw: np.ndarray) -> bool:
 
 @numba.njit
 def _collide(ends: np.ndarray, seg_normal: np.ndarray, radius: float, vw: np.ndarray, nw: np.ndarray,
-             out: np.ndarray, feat: np.ndarray) -> tuple[float, float, bool, bool]:
+             out: np.ndarray, feat: np.ndarray, sides: np.ndarray) -> tuple[float, float, bool, bool]:
     """:func:`.incisors.collide` for one blade at world vertices ``vw`` and plane normals ``nw``: writes
     the two contacts' points on the segment and on the blade to ``out`` ``(2, 4)`` and their features
-    to ``feat`` ``(2, 2)``; returns the normal and which contacts exist."""
+    to ``feat`` ``(2, 2)`` (``sides``: room for each candidate edge's hull side); returns the normal and which
+    contacts exist."""
     count = vw.shape[0]
-    inside = _cores_overlap(ends, vw)
+    inside = _cores_overlap(ends, vw, sides)
     best_d, best_px, best_py, e_dx, e_dy, best_left = np.inf, 0.0, 0.0, 0.0, 0.0, 0
     best_ia = best_ja = best_ib = best_jb = 0
     for k in range(3 * count):
         ia, ja, ib, jb = _candidate(k, count)
         ax, ay = vw[ja, 0] - ends[ia, 0], vw[ja, 1] - ends[ia, 1]
         bx, by = vw[jb, 0] - ends[ib, 0], vw[jb, 1] - ends[ib, 1]
-        left = _hull_side(ax, ay, bx, by, ends, vw) if inside else 0
+        left = sides[k] if inside else 0
         if inside and left == 0:                         # inside the hull: not where EPA ends
             continue
         t = _closest_t(ax, ay, bx, by)
@@ -215,7 +217,7 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
     i_sum = 1.0 / i_inv
     w_coef = 1.0 - math.exp(-c_rot * h * i_inv)
     vw, nw = np.empty((count_v, 2)), np.empty((count_v, 2))
-    points, feat_new = np.empty((2, 4)), np.empty((2, 2), dtype=np.int64)
+    points, feat_new, sides = np.empty((2, 4)), np.empty((2, 2), dtype=np.int64), np.empty(3 * count_v, dtype=np.int64)
     feat = np.empty((2, 2), dtype=np.int64)
     jn, jt, jn_new, jt_new = np.empty(2), np.empty(2), np.empty(2), np.empty(2)
     r2x, r2y, n_mass, t_mass = np.empty(2), np.empty(2), np.empty(2), np.empty(2)
@@ -257,7 +259,7 @@ def control_period(blade: np.ndarray, hand: np.ndarray, lateral: np.ndarray, han
                 touching = first = False        # no contact, no arbiter: only its age changes, as _collide's would
                 ticks += 1
             else:
-                nnx, nny, ex_new[0], ex_new[1] = _collide(ends, seg_normal, radius, vw, nw, points, feat_new)
+                nnx, nny, ex_new[0], ex_new[1] = _collide(ends, seg_normal, radius, vw, nw, points, feat_new, sides)
                 touching = ex_new[0] or ex_new[1]
                 jn_new[:], jt_new[:] = 0.0, 0.0
                 for new in range(2):
