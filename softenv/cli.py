@@ -281,9 +281,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="reports", help="output directory (default: reports, which git ignores; "
                                                     "--out results refreshes the committed results)")
     p.add_argument("--only", nargs="+", choices=list(bench.SECTIONS), metavar="SECTION",
-                   help=f"run only these sections: {', '.join(bench.SECTIONS)} (default: all but gpu)")
+                   help=f"run only these sections: {', '.join(bench.SECTIONS)} (default: all but the GPU sections "
+                        f"{' and '.join(bench.GPU_SECTIONS)}, which run with --device cuda)")
     p.add_argument("--device", choices=["cpu", "cuda"], default="cpu",
-                   help="cuda: the torch twin on the GPU alone, written to perf-gpu.md (needs a CUDA device)")
+                   help="cuda: the torch twins on the GPU alone (the GPU sections, or those named by --only), written to "
+                        "perf-gpu.md (needs a CUDA device)")
 
     p = sub.add_parser("compare", help="baselines and RL agents on the benchmark scenes (the main job)")
     profile = p.add_mutually_exclusive_group()

@@ -164,16 +164,24 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     assert (tmp_path / "perf-gpu_quick.md").exists()
     assert any(r.metric.startswith("host synchronisations") and r.ok for r in rows)
     assert sum(r.metric.startswith("SoftSphere-v0: torch twin on") for r in rows) == 2 * 5  # 2 sizes x 5 modes
-    haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0:")]
+    haptic = [r for r in rows if r.section == "gpu-haptic"]
     assert haptic[0].metric.startswith("SoftSphereHaptic-v0: host synchronisations") and haptic[0].ok
-    assert len(haptic) == 1 + 2 * 2 + 1 and haptic[-1].target == ">= 50M"    # the sync check, 2 sizes x 2, the best
-    assert sum("CUDA graph" in r.metric for r in haptic) == 2 and all(r.value > 0 for r in haptic[1:])
+    assert len(haptic) == 1 + 2 * 4 + 1 and haptic[-1].target == ">= 50M"    # the sync check, 2 sizes x 4, the best
+    assert sum("CUDA graph" in r.metric for r in haptic) == 2 * 2 and all(r.value > 0 for r in haptic[1:])
+
+
+def test_bench_device_cuda_runs_the_gpu_sections_alone(tmp_path):
+    from softenv import bench
+
+    with pytest.raises(ValueError, match=r"--only tissue gpu: --device cuda runs the GPU sections only \(gpu, gpu-haptic\)"):
+        bench.run(True, tmp_path, ["tissue", "gpu"], echo=lambda s: None, device="cuda")
+    assert not list(tmp_path.iterdir())                                  # refused before it measured or wrote
 
 
 def test_the_gpu_rows_run_on_cpu_tensors_too():
     """The GPU section's code path (sizes, eager and compiled timings, targets) on CPU tensors, so a
     first GPU run does not meet it untried."""
-    from softenv.bench.env import device_rows
+    from softenv.bench.env import device_rows, haptic_tensor_rows
 
     rows = device_rows("cpu", "cpu", (1024, 64), 2)
     twins = [r for r in rows if r.metric.startswith("SoftSphere-v0: torch twin on cpu")]
@@ -182,8 +190,9 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     assert all(r.value > 0 and r.target == ">= 10M" and r.ok is (r.value >= 10e6) for r in twins[:2])
     assert all(r.target == "" and r.ok is None for r in twins[2:])
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
-    haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0:")]
+    haptic = haptic_tensor_rows("cpu", "cpu", (64,), 2)
     assert len(haptic) == 1 and "64 envs" in haptic[0].metric and haptic[0].value > 0      # no target off CUDA
+    assert haptic[0].section == "gpu-haptic" and "eager" in haptic[0].metric
 
 
 def test_the_cuda_graph_timing_runs_on_cpu_tensors_and_leaves_inductor_as_it_was():

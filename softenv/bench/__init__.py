@@ -29,9 +29,11 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
     "bridge": ("softenv.bench.bridge", "bench_bridge"),
     "play": ("softenv.bench.play", "bench_play"),
-    "gpu": ("softenv.bench.env", "bench_gpu"),          # only with --device cuda
+    "gpu": ("softenv.bench.env", "bench_gpu"),                 # --device cuda: SoftSphere-v0's torch twin
+    "gpu-haptic": ("softenv.bench.env", "bench_gpu_haptic"),   # --device cuda: the laryngoscope's torch twin
 }
-DEFAULT_SECTIONS = [name for name in SECTIONS if name != "gpu"]
+GPU_SECTIONS = ["gpu", "gpu-haptic"]
+DEFAULT_SECTIONS = [name for name in SECTIONS if name not in GPU_SECTIONS]
 
 
 
@@ -57,13 +59,13 @@ def threads_pinned() -> bool:
 
 def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str = "softenv bench",
         echo: Callable[[str], None] = print, device: str = "cpu") -> list[Row]:
-    """Run the selected sections (all but ``gpu`` by default), print the table, write the reports
-    (``perf.*``; ``device="cuda"`` runs the ``gpu`` section alone and writes ``perf-gpu.*``)."""
+    """Run the selected sections (all but the GPU ones by default), print the table, write the reports
+    (``perf.*``; ``device="cuda"`` runs the GPU sections, all or those in ``only``, and writes ``perf-gpu.*``)."""
     if device not in ("cpu", "cuda"):
         raise ValueError(f"device={device!r} must be 'cpu' or 'cuda'")
-    if device == "cuda" and only:
-        raise ValueError("--device cuda runs the gpu section alone; drop --only")
-    names = ["gpu"] if device == "cuda" else (only or DEFAULT_SECTIONS)
+    if device == "cuda" and only and not set(only) <= set(GPU_SECTIONS):
+        raise ValueError(f"--only {' '.join(only)}: --device cuda runs the GPU sections only ({', '.join(GPU_SECTIONS)})")
+    names = (only or GPU_SECTIONS) if device == "cuda" else (only or DEFAULT_SECTIONS)
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
         raise ValueError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")

@@ -294,14 +294,24 @@ def bench_gpu(quick: bool, reference: Timing) -> list[Row]:
     """``softenv bench --device cuda``: the torch twin on the GPU (float32, device draw, same-step
     autoreset, no action check), eager and under ``torch.compile``, with the issue's targets, the
     numpy twin on one CPU core beside it, and a check that a step never synchronises with the host."""
+    sizes = (1024, 262_144) if quick else (1024, 262_144, 1_048_576)
+    return device_rows("cuda", _cuda_name(), sizes, 20 if quick else 100)
+
+
+def bench_gpu_haptic(quick: bool, reference: Timing) -> list[Row]:
+    """``softenv bench --device cuda`` (section ``gpu-haptic``): the laryngoscope's torch twin on the GPU
+    (:func:`haptic_tensor_rows`), its best batch size held to issue 37's target."""
+    return haptic_tensor_rows("cuda", _cuda_name(), HAPTIC_GPU_SIZES[:2] if quick else HAPTIC_GPU_SIZES, 3)
+
+
+def _cuda_name() -> str:
     torch = _torch_or_none()
     if torch is None or not torch.cuda.is_available():
         raise RuntimeError("--device cuda: no CUDA device in this process (torch.cuda.is_available() is False)")
-    sizes = (1024, 262_144) if quick else (1024, 262_144, 1_048_576)
-    return device_rows("cuda", torch.cuda.get_device_name(), sizes, 20 if quick else 100, quick)
+    return str(torch.cuda.get_device_name())
 
 
-def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int, quick: bool = False) -> list[Row]:
+def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
     """The rows of :func:`bench_gpu` on ``device`` (named ``name``); the host-sync check runs on CUDA
     only (``torch.cuda.set_sync_debug_mode``), elsewhere its row says so."""
     import torch                                            # torch: the rl extra
@@ -333,8 +343,7 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int, quic
                 continue
             rows.append(Row("gpu", label, rate, "env-steps/s", f"{rate / numpy_rate:.1f}x the numpy twin",
                             f">= {target / 1e6:.0f}M" if target else "", rate >= target if target else None))
-    haptic_sizes = (HAPTIC_GPU_SIZES[:2] if quick else HAPTIC_GPU_SIZES) if device == "cuda" else (64,)
-    return rows + haptic_tensor_rows(device, name, haptic_sizes, 3)
+    return rows
 
 
 HAPTIC_ID = "SoftSphereHaptic-v0"
@@ -352,7 +361,7 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
     rows = []
     if device == "cuda":
         synced = host_synchronisation(_torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID), 3)
-        rows.append(Row("gpu", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
+        rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     # on CPU the eager row alone (bench_torch times the compiled substep there: a compile takes minutes)
     variants = [(None, False)] + ([("default", False), (None, True), ("default", True)] if device == "cuda" else [])
@@ -366,13 +375,13 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
                                              env_id=HAPTIC_ID, warmup=2).median
             except Exception as exc:           # out of memory at the largest size: report it, go on
                 message = " ".join(str(exc).split())
-                rows.append(Row("gpu", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
+                rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
                                 ok=False))
                 continue
             best = max(best, (rate, f"{how}, {n:,} envs"))
-            rows.append(Row("gpu", label, rate, "env-steps/s"))
+            rows.append(Row("gpu-haptic", label, rate, "env-steps/s"))
     if device == "cuda" and best[0] > 0:
-        rows.append(Row("gpu", f"{HAPTIC_ID}: torch twin on {name}, best", best[0], "env-steps/s", best[1],
+        rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: torch twin on {name}, best", best[0], "env-steps/s", best[1],
                         f">= {HAPTIC_GPU_TARGET / 1e6:.0f}M", best[0] >= HAPTIC_GPU_TARGET))
     return rows
 
