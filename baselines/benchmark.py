@@ -443,7 +443,7 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
 
     return [(out_dir / _error_plot_name(stem), _error_plot(summaries, plan.scenes, command, plt)),
             (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
-            (out_dir / f"{stem}_gallery.png", _gallery(command, plt))]
+            (out_dir / f"{stem}_gallery.png", _gallery(plan.scenes[0], command, plt))]
 
 
 def _error_plot(summaries: list[dict[str, Any]], scenes: list[str], command: str, plt: Any) -> Any:
@@ -565,26 +565,42 @@ def _suptitle(fig: Any, text: str, command: str, fontsize: float = 7) -> None:
     fig.suptitle("\n".join(lines), fontsize=fontsize)
 
 
-def _gallery(command: str, plt: Any) -> Any:
-    """Final shapes against targets on one test episode of SoftSphere-v0, for a few baselines."""
+GALLERY = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle", "expert"]
+
+
+def _gallery(scene: str, command: str, plt: Any) -> Any:
+    """Final shapes against targets after 20 steps of one test episode of ``scene`` (a report's first), for
+    the baselines of :data:`GALLERY` that exist for its device."""
     from softenv.render import displacement_colorbar         # matplotlib: the viz extra
 
-    names = ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp", "oracle"]
-    env_id, kwargs = scene_kwargs("SoftSphere-v0")
+    names = [name for name in GALLERY if applies(name, device_kind(scene))]
+    env_id, kwargs = scene_kwargs(scene)
     kwargs.pop("obs_mode")
     world = World(make_config(**kwargs))
-    fig, axes = plt.subplots(1, len(names), figsize=(2.4 * len(names), 3.3), layout="constrained")
-    for ax, name in zip(axes, names):
+    frames: list[np.ndarray] = []
+    errors: list[float] = []
+    for name in names:
         env = gym.make(env_id, render_mode="rgb_array", **kwargs)
         policy = make_baseline(name, world)
         obs, _ = env.reset(seed=3)
         for _ in range(20):
             obs, _, _, _, info = env.step(policy.predict(obs))
-        ax.imshow(env.render())
-        ax.set_title(f"{name}\n{info['shape_error_mm']:.2f} mm", fontsize=7)
-        ax.axis("off")
+        frames.append(np.asarray(env.render()))
+        errors.append(info["shape_error_mm"])
         env.close()
-    displacement_colorbar(fig, axes, world.scene.tissue.radius, orientation="horizontal", shrink=0.4, aspect=40)
-    _suptitle(fig, "final shape (colour) and target (blue wireframe), one test episode of SoftSphere-v0, with its final "
-              "shape error", command, fontsize=6)
+    aspect = frames[0].shape[1] / frames[0].shape[0]            # the laryngoscope's frame is twice as wide
+    columns = len(names) if aspect < 1.5 else 3
+    rows = -(-len(names) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(2.4 * aspect * columns, 2.4 * rows + 0.9), layout="constrained",
+                             squeeze=False)
+    for ax in axes.flat[len(names):]:
+        ax.axis("off")
+    for ax, name, frame, error in zip(axes.flat, names, frames, errors):
+        ax.imshow(frame)
+        ax.set_title(f"{name}\n{error:.2f} mm", fontsize=7)
+        ax.axis("off")
+    displacement_colorbar(fig, axes.flat[:len(names)], world.scene.tissue.radius, orientation="horizontal",
+                          shrink=0.4, aspect=40)
+    _suptitle(fig, f"final shape (colour) and target (blue wireframe) after 20 steps of one test episode of {scene}, "
+              "with its shape error", command, fontsize=6)
     return fig

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, agent_colours, format_seeds, run
+from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run
 from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
@@ -221,6 +221,21 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
     assert f"at {code_revision()} (" in csv_text.splitlines()[0]        # the code that made it, by commit
     for name in ("policy_error_vs_runtime.png", "benchmark_learning_curves.png", "benchmark_gallery.png"):
         assert (tmp_path / name).stat().st_size > 1000
+
+
+def test_the_gallery_shows_the_reports_first_scene_with_its_devices_baselines():
+    """A laryngoscope report's gallery draws its scene (the expert, no oracle) in two rows of wide frames;
+    each panel's error is the one its policy's episode reached."""
+    import matplotlib.pyplot as plt
+
+    fig = _gallery("SoftSphereHaptic-v0", "softenv compare --test", plt)
+    panels = [ax.get_title() for ax in fig.axes if ax.get_title()]
+    assert [t.split("\n")[0] for t in panels] == ["zero", "invert-poly1", "invert-poly3", "invert-anfis", "direct-mlp",
+                                                   "expert"]
+    errors = [float(t.split("\n")[1].removesuffix(" mm")) for t in panels]
+    assert errors[-1] < 0.5 < errors[0]                          # the expert near its target, no force far from it
+    assert "of SoftSphereHaptic-v0" in fig.get_suptitle()
+    plt.close(fig)
 
 
 def test_the_error_axis_reaches_the_floor_only_where_a_policy_does():
