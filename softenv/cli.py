@@ -293,7 +293,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
     profile.add_argument("--haptic", action="store_true",
                          help="the two laryngoscope scenes, every baseline, the four agents at their converged budgets "
-                              "over 3 seeds (report benchmark_haptic.*; on 2 cores about 3 h from an empty --runs, 17 min with "
+                              "over 3 seeds (report benchmark_haptic.*; on 2 cores about 3 h from an empty --runs, 9 min with "
                               "its agents trained)")
     p.add_argument("--scenes", nargs="+", choices=list(benchmark.SCENES), metavar="SCENE",
                    help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
