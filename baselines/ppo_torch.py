@@ -294,8 +294,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--update-epochs", type=int, default=Args.update_epochs)
     p.add_argument("--no-normalize-obs", action="store_true", help="feed raw observations (as SB3's PPO here)")
     p.add_argument("--compile-env", action="store_true",
-                   help="the env compiles its step (CUDA graphs on a GPU; needs --target-draw device; the "
-                        "laryngoscope's substep is refused on CUDA: docs/laryngoscope.md)")
+                   help="the env compiles its step (CUDA graphs on a GPU; needs --target-draw device; refused for "
+                        "the laryngoscope on CUDA, where one Triton kernel runs its step: docs/laryngoscope.md)")
     p.add_argument("--episodes", type=int, default=100, help="test episodes per seed")
     p.add_argument("--jobs", type=int, default=1, help="seeds trained at once (local worker processes)")
     p.add_argument("--out", help="folder for the weights (ppo-torch-<seed>.pt)")

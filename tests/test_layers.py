@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("softenv", "baselines")
 # what an extra (or the platform) brings: the only reasons to import inside a function
 OPTIONAL = {"pymunk", "torch", "matplotlib", "felupe", "ray", "pygame", "stable_baselines3", "yaml", "scipy",
-            "tensorboard", "rich", "tqdm", "torchrl", "resource", "pyOpenHaptics", "forcedimension_core"}
+            "tensorboard", "rich", "tqdm", "torchrl", "resource", "pyOpenHaptics", "forcedimension_core",
+            "triton"}
 
 
 def module_name(path: Path) -> str:

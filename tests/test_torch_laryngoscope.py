@@ -2,6 +2,8 @@
 which equals the single pymunk device bit for bit (tests/test_laryngoscope_arrays.py), and the torch twin
 on the haptic ids against the numpy twin."""
 
+import importlib.util
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -16,6 +18,17 @@ from softenv.envs.config import scene_config  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+# the tensor engine on every device; the fused Triton kernel (the torch twin's default on CUDA) on CUDA
+ENGINES = [("tensors", d) for d in DEVICES] + \
+    ([("fused", "cuda")] if "cuda" in DEVICES and importlib.util.find_spec("triton") is not None else [])
+
+
+def _engine(name):
+    if name == "fused":
+        from softenv.devices.laryngoscope.fused import LaryngoscopeFused      # triton: GPU machines only
+
+        return LaryngoscopeFused
+    return LaryngoscopeTensors
 FIELDS = ("blade", "hand", "lateral", "contact", "hand_velocity")
 
 
@@ -29,23 +42,25 @@ def _rollout_actions(periods, n, seed=4):
     return actions
 
 
-@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("engine, device", ENGINES, ids=[f"{e}-{d}" for e, d in ENGINES])
 @pytest.mark.parametrize("sections, periods, on_incisors", [
     ({}, 100, 5),
     ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 1, 0),
     ({"tissue": {"E": 1e3}}, 40, 0),
 ], ids=["default", "stiff", "soft"])
-def test_the_tensor_batch_agrees_with_the_numpy_engine_over_whole_rollouts(sections, periods, on_incisors, device):
+def test_the_tensor_batch_agrees_with_the_numpy_engine_over_whole_rollouts(sections, periods, on_incisors, engine,
+                                                                          device):
     """Every control period of a rollout (pressing, levering on the incisors and into the walls, idle,
     random) on the default scene and the documented extreme corners (1e6 N/m coupling, 10 g blade, 10 MPa
     tongue: one period of its 1,826 substeps; a 1 kPa tongue): the blade's pose within 1e-9 (m, rad), the hands
     exactly, the lateral state, the tongue's and incisors' forces and the observation within 1e-5 of their
     largest value in the rollout (measured: 2e-8 of it; torch's cos, sin and exp are not the C
-    library's, and the lateral stick-slip switches on a comparison, so rounding grows there)."""
+    library's, nor are the GPU's that the fused kernel calls, and the lateral stick-slip switches on a
+    comparison, so rounding grows there)."""
     world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], sections))
     parts = laryngoscope_parts(world.scene, world.config)
     n = 4
-    ref, mine = LaryngoscopeArrays(*parts, n), LaryngoscopeTensors(*parts, n, device)
+    ref, mine = LaryngoscopeArrays(*parts, n), _engine(engine)(*parts, n, device)
     peaks = {f: 1e-300 for f in FIELDS}
     incisors = 0
     for a in _rollout_actions(periods, n):
@@ -150,12 +165,13 @@ def test_the_tensor_state_stays_where_the_last_step_wrote_it():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a CUDA device")
-def test_the_recorded_haptic_step_replays_the_eager_one_bit_for_bit():
+@pytest.mark.parametrize("batch_engine", ["compiled", "numpy"])      # the fused kernel where triton is; the tensor engine
+def test_the_recorded_haptic_step_replays_the_eager_one_bit_for_bit(batch_engine):
     """cuda_graph=True on the laryngoscope (the step recorded once per value of the host's may-start flag and
     replayed) against the eager step, the same seeds and actions, through autoresets and levering on the
     teeth: the same bits in every output."""
     kwargs = dict(num_envs=8, torch_device="cuda", dtype=torch.float32, target_draw="device", check_actions=False,
-                  max_episode_steps=12, autoreset_mode="same_step")
+                  max_episode_steps=12, autoreset_mode="same_step", device={"batch_engine": batch_engine})
     eager, graphed = _make("SoftSphereHaptic-v0", "torch", **kwargs), _make("SoftSphereHaptic-v0", "torch",
                                                                               cuda_graph=True, **kwargs)
     eager.reset(seed=5)
@@ -212,8 +228,10 @@ def test_inductor_on_cuda_is_refused_by_name_and_other_compiles_are_not():
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="a CUDA device to refuse inductor on (the check: above)")
 def test_the_twin_refuses_inductor_on_cuda_before_it_builds():
+    """The tensor engine's refusal (the fused kernel's own: tests/test_laryngoscope_fused.py)."""
     with pytest.raises(ValueError, match="inductor's CUDA code for the laryngoscope's substep"):
-        _make("SoftSphereHaptic-v0", "torch", num_envs=4, torch_device="cuda", target_draw="device", compile_options={})
+        _make("SoftSphereHaptic-v0", "torch", num_envs=4, torch_device="cuda", target_draw="device", compile_options={},
+              device={"batch_engine": "numpy"})
 
 
 def test_a_device_without_tensors_is_refused_by_name():

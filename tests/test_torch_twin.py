@@ -166,8 +166,10 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     assert sum(r.metric.startswith("SoftSphere-v0: torch twin on") for r in rows) == 2 * 5  # 2 sizes x 5 modes
     haptic = [r for r in rows if r.section == "gpu-haptic"]
     assert haptic[0].metric.startswith("SoftSphereHaptic-v0: host synchronisations") and haptic[0].ok
-    assert len(haptic) == 1 + 2 * 2 + 1 and haptic[-1].target == ">= 50M"    # the sync check, 2 sizes x 2, the best
-    assert sum("CUDA graph" in r.metric for r in haptic) == 2 and all(r.value > 0 for r in haptic[1:])
+    # the sync check; 2 sizes x 2 engines (the fused kernel, the tensor engine) x eager and recorded; the best
+    assert len(haptic) == 1 + 2 * 2 * 2 + 1 and haptic[-1].target == ">= 50M"
+    assert sum("CUDA graph" in r.metric for r in haptic) == 4 and all(r.value > 0 for r in haptic[1:])
+    assert sum("fused kernel" in r.metric for r in haptic) == 4
 
 
 def test_bench_device_cuda_runs_the_gpu_sections_alone(tmp_path):
@@ -192,7 +194,7 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
     haptic = haptic_tensor_rows("cpu", "cpu", (64,), 2)
     assert len(haptic) == 1 and "64 envs" in haptic[0].metric and haptic[0].value > 0      # no target off CUDA
-    assert haptic[0].section == "gpu-haptic" and "eager" in haptic[0].metric
+    assert haptic[0].section == "gpu-haptic" and "tensor engine, eager" in haptic[0].metric
 
 
 def test_the_cuda_graph_timing_runs_on_cpu_tensors_and_leaves_inductor_as_it_was():

@@ -6,6 +6,7 @@ the SB3 adapter against the twin it wraps (section ``sb3``); the torch backend b
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import itertools
 import json
 import os
@@ -353,9 +354,9 @@ HAPTIC_GPU_TARGET = 50e6         # issue 37: env-steps/s at the best batch size
 
 def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
     """The laryngoscope's torch twin (float32 env, float64 device physics, device draw, same-step autoreset,
-    no action check) on ``device`` over batch sizes: eager, and on CUDA also recorded as CUDA graphs
-    (``cuda_graph=True``), after a check that its steps never synchronise with the host. The best is held
-    to the issue's target."""
+    no action check) on ``device`` over batch sizes: the tensor engine eager, and on CUDA also the fused
+    Triton kernel, each also recorded as CUDA graphs (``cuda_graph=True``), after a check that the default
+    engine's steps never synchronise with the host. The best is held to the issue's target."""
     import torch                                            # torch: the rl extra
 
     rows = []
@@ -363,16 +364,19 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
         synced = host_synchronisation(_torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID), 3)
         rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
-    # on CPU the eager row alone (bench_torch times the compiled substep there: a compile takes minutes); on
-    # CUDA the eager step recorded too: inductor's CUDA code for the substep is refused (tensors.check_compile)
+    # on CPU the tensor engine's eager row alone (bench_torch times its compiled substep there: a compile takes
+    # minutes); on CUDA the fused kernel (the default) and the tensor engine, each eager and recorded
+    engines = [("tensor engine", "numpy")]
+    if device == "cuda" and importlib.util.find_spec("triton") is not None:
+        engines.insert(0, ("fused kernel", "compiled"))
     best: tuple[float, str] = (0.0, "")
-    for graphed in [False, True] if device == "cuda" else [False]:
-        how = "eager" + (", CUDA graph (cuda_graph=True)" if graphed else "")
+    for (engine, batch_engine), graphed in itertools.product(engines, [False, True] if device == "cuda" else [False]):
+        how = f"{engine}, eager" + (", CUDA graph (cuda_graph=True)" if graphed else "")
         for n in sizes:
             label = f"{HAPTIC_ID}: torch twin on {name}, {how}, float32 env, float64 device, device draw, {n:,} envs"
             try:
                 rate = n / torch_step_timing(n, device, torch.float32, "device", None, calls, cuda_graph=graphed,
-                                             env_id=HAPTIC_ID, warmup=2).median
+                                             env_id=HAPTIC_ID, warmup=2, batch_engine=batch_engine).median
             except Exception as exc:           # out of memory at the largest size: report it, go on
                 message = " ".join(str(exc).split())
                 rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
@@ -405,11 +409,13 @@ def host_synchronisation(env: Any, steps: int) -> str:
 
 
 def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | None, calls: int,
-                      cuda_graph: bool = False, env_id: str = "SoftSphere-v0", warmup: int | None = None) -> Timing:
+                      cuda_graph: bool = False, env_id: str = "SoftSphere-v0", warmup: int | None = None,
+                      batch_engine: str | None = None) -> Timing:
     """Seconds per step of the torch twin of ``env_id`` (5 repeats of ``calls`` steps, the device
     synchronised around each; ``mode``: None (eager) or a ``torch.compile(fullgraph=True)`` mode, warmed up;
     ``"reduce-overhead"``, any timing with ``cuda_graph`` and every laryngoscope timing go through the env
-    itself: its ``compile_options`` and ``cuda_graph``)."""
+    itself: its ``compile_options`` and ``cuda_graph``; ``batch_engine``: the laryngoscope's
+    ``device.batch_engine``, its default when None)."""
     import torch                                            # torch: the rl extra
 
     if mode is not None:
@@ -420,8 +426,9 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
         # CUDA graphs: the env compiles (compile_options) or records (cuda_graph) its own step. Compiling
         # env.step whole would make the host's step count an int input, and CUDA graphs record a new graph
         # for each of its values. The laryngoscope compiles its substep itself (its step unrolled is too big).
+        engine = {} if batch_engine is None else {"device": {"batch_engine": batch_engine}}
         env = _torch_twin(n, device, dtype, draw, env_id=env_id,
-                          compile_options=None if mode is None else {"mode": mode}, cuda_graph=cuda_graph)
+                          compile_options=None if mode is None else {"mode": mode}, cuda_graph=cuda_graph, **engine)
         step = env.step
     else:
         env = _torch_twin(n, device, dtype, draw, env_id=env_id)
@@ -455,9 +462,9 @@ def _compiled_label(mode: str | None, cuda_graph: bool = False) -> str:
     return "" if mode is None else (", torch.compile" if mode == "default" else f", torch.compile {mode}")
 
 
-def _torch_twin(n: int, device: str, dtype: Any, draw: str, env_id: str = "SoftSphere-v0", **kwargs: Any) -> Any:
+def _torch_twin(n: int, torch_device: str, dtype: Any, draw: str, env_id: str = "SoftSphere-v0", **kwargs: Any) -> Any:
     env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", backend="torch",
-                       torch_device=device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
+                       torch_device=torch_device, dtype=dtype, target_draw=draw, check_actions=False, autoreset_mode="same_step",
                        **kwargs)
     env.reset(seed=0)
     return env

@@ -165,7 +165,9 @@ SCHEMA: dict[str, dict[str, Field]] = {
                                "force-feedback device whose limits shape haptic_force_N"),
         "batch_engine": Field("compiled", "", "compiled | numpy | pymunk", _choice(*BATCH_ENGINES),
                               "the laryngoscope batched (vector envs): compiled (numba, a loop over devices) and "
-                              "numpy (arrays) equal the single env bit for bit; pymunk (one space) agrees to rounding"),
+                              "numpy (arrays) equal the single env bit for bit; pymunk (one space) agrees to rounding. "
+                              "On torch tensors: compiled is one Triton kernel a step on CUDA (the tensor engine "
+                              "elsewhere), numpy the tensor engine; pymunk has none"),
     },
     "dynamics": {
         "kind": Field("quasi_static", "", "quasi_static | viscoelastic", _choice("quasi_static", "viscoelastic"),

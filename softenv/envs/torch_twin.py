@@ -13,8 +13,9 @@ observation is float32 like the observation space.
 What it expresses: the tabulated response (``response.model = "exact"``, analytic or FE tissue, any
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
 dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal device, and the
-laryngoscope on float64 tensors, which agrees with the numpy engines to rounding; ``compile_options``
-compiles its substep, not the whole step, and not with inductor on CUDA).
+laryngoscope on float64 tensors, which agrees with the numpy engines to rounding: on CUDA one Triton
+kernel a step by default, elsewhere the tensor engine, whose substep ``compile_options`` compiles, not
+with inductor on CUDA).
 Not: regressor responses and vertex observations.
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
@@ -65,8 +66,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         compile_options: ``torch.compile`` arguments (``{"mode": "reduce-overhead"}`` for CUDA graphs):
             the env compiles its step's tensor work (``fullgraph``; two graphs) and keeps its step count
             and the action check on the host; a device with a step of its own to compile (the
-            laryngoscope: its substep, run 20 times a step) compiles that alone and the env's work stays
-            eager (with inductor, on CPU only: ``tensors.check_compile``). Needs ``target_draw="device"``. With CUDA graphs a step's outputs live until the next
+            laryngoscope's tensor engine: its substep, run 20 times a step) compiles that alone and the env's
+            work stays eager (with inductor, on CPU only: ``tensors.check_compile``; the fused kernel, the
+            laryngoscope's default on CUDA, refuses it). Needs ``target_draw="device"``. With CUDA graphs a step's outputs live until the next
             step: clone what you keep.
         cuda_graph: record the step's tensor work (eager, or compiled by ``compile_options`` in a mode
             without CUDA graphs) as CUDA graphs the env replays itself (:mod:`softenv.envs.torch_graph`):

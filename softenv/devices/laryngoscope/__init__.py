@@ -11,9 +11,11 @@ A package split by job; only the modules marked pymunk import it:
 * :mod:`.batch` -- ``n`` devices on arrays: with ``pymunk.batch`` or with :mod:`.rigid` (pymunk).
 * :mod:`.kernel` -- ``n`` devices in one compiled loop (numba): the batch's default engine.
 * :mod:`.tensors` -- ``n`` devices on torch tensors (the numpy array engine's code, torch's operations).
+* :mod:`.fused` -- ``n`` devices on CUDA tensors, each control period one Triton kernel (triton).
 * :mod:`.part` -- the env-facing parts (the device contract of :mod:`softenv.devices.base`): workspace
   clip, the incisor reward term, info keys, the clinical record (pymunk); :mod:`.part_batch` the
-  batch's, on the engine ``device.batch_engine`` names (pymunk, numba).
+  batch's, on the engine ``device.batch_engine`` names (pymunk, numba); :mod:`.part_tensors` the torch
+  twin's (torch).
 
 This module holds the kind, the batch engines' names (:data:`LARYNGOSCOPE`) and the observation's names and scales, so readers
 of the observation (:mod:`softenv.control`, the baselines) load without pymunk.
@@ -49,7 +51,7 @@ def _batch(scene: DeviceScene, config: Config, n: int) -> Any:
 
 
 def _tensors(scene: DeviceScene, config: Config, n: int, torch_device: Any, dtype: Any) -> Any:
-    from .tensors import LaryngoscopeTensorPart      # pymunk and torch: only for the torch twin's laryngoscopes
+    from .part_tensors import LaryngoscopeTensorPart      # pymunk and torch: only for the torch twin's laryngoscopes
 
     return LaryngoscopeTensorPart(scene, config, n, torch_device, dtype)
 

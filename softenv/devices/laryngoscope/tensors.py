@@ -1,5 +1,5 @@
-"""``n`` laryngoscopes on torch tensors, CPU or GPU, for the torch twin (:class:`LaryngoscopeTensors`,
-and the part it composes, :class:`LaryngoscopeTensorPart`).
+"""``n`` laryngoscopes on torch tensors, CPU or GPU, for the torch twin (:class:`LaryngoscopeTensors`;
+the part the twin composes is :mod:`.part_tensors`).
 
 The numpy array engine (:class:`~.batch.LaryngoscopeArrays`: :mod:`.rigid`, :mod:`.incisors`,
 :mod:`.physics`) is written against an ``ops`` class and an array namespace; here they are
@@ -20,12 +20,9 @@ import numpy as np
 import torch
 
 from ..._torch_ops import TorchOps
-from ..base import Config, DeviceScene
 from ..contact import TongueContact
-from . import LARYNGOSCOPE_OBS
 from .batch import LaryngoscopeArrays
 from .params import LaryngoscopeParams
-from .part import INFO_KEYS, batch_report, in_workspace, laryngoscope_parts
 from .space import DeviceState
 
 
@@ -73,6 +70,13 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
             return value.to(self.torch_device)
         return torch.as_tensor(np.asarray(value), device=self.torch_device)
 
+    def compile_substep(self, options: dict[str, Any]) -> None:
+        """Compile the substep (``fullgraph``, static shapes), not the step: a step's 20 substeps unrolled
+        would be one graph of some 14,000 operations. Refused where inductor's code is known wrong
+        (:func:`check_compile`)."""
+        check_compile(options, self.torch_device)
+        self._substep = torch.compile(self._substep, fullgraph=True, dynamic=False, **options)  # type: ignore[method-assign]
+
     def state(self) -> DeviceState:
         bodies = self._bodies()
         host = [x.cpu().numpy() for x in (bodies[:, 1], bodies[:, 0, :3], self._lateral,
@@ -97,56 +101,6 @@ class LaryngoscopeTensors(LaryngoscopeArrays):
         self._flush(mask)
         self._forget()
         self._keep_in_place()
-
-
-class LaryngoscopeTensorPart:
-    """The laryngoscope as the torch twin composes it (:class:`~softenv.devices.base.DeviceTensors`): as
-    :class:`~.part_batch.LaryngoscopePartBatch` (the workspace clip, the incisor reward term, the info
-    keys) on tensors; no clinical record (the numpy twin keeps it)."""
-
-    obs_names = LARYNGOSCOPE_OBS
-    info_keys = INFO_KEYS
-    episode_info_keys: tuple[str, ...] = ()
-
-    def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
-                 dtype: torch.dtype) -> None:
-        self.laryngoscopes = LaryngoscopeTensors(*laryngoscope_parts(scene, config), n, torch_device)
-        self.dtype = dtype
-        start = self.laryngoscopes.start_state(n)
-        self._start_state = DeviceState(*(self.laryngoscopes._array(v) for v in vars(start).values()))  # type: ignore[arg-type]
-        t = self.laryngoscopes._array
-        self._low, self._high = t(scene.workspace.low), t(scene.workspace.high)
-        self._rest = t(scene.rest_features)
-        self._prev = torch.zeros(4, dtype=dtype, device=torch_device)
-        self._weights = dict(config["reward"])
-
-    def reset(self, mask: torch.Tensor) -> torch.Tensor:
-        self.laryngoscopes.load_state(self._start_state, rows=mask)
-        return self._prev
-
-    def act(self, actions: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        dev = self.laryngoscopes
-        dev.control_step(actions.to(torch.float64), moving=stepped)
-        features, touching = dev.features()
-        f = in_workspace(features, touching, self._low, self._high, self._rest, dev.xp)
-        return f.to(self.dtype), dev.normal_force.to(self.dtype), dev.sideways_force.to(self.dtype)
-
-    def observation(self, features: torch.Tensor) -> torch.Tensor:
-        return self.laryngoscopes.observation().to(self.dtype)
-
-    def report(self, info: dict[str, Any], stepped: torch.Tensor) -> torch.Tensor:
-        term, values = batch_report(self.laryngoscopes, self._weights, lambda x: x.to(self.dtype))
-        info.update(values)
-        return term
-
-    def compile(self, options: dict[str, Any]) -> bool:
-        """Compile the substep (``fullgraph``, static shapes), not the step: a step's 20 substeps unrolled
-        would be one graph of some 14,000 operations. Refused where inductor's code is known wrong
-        (:func:`check_compile`)."""
-        dev = self.laryngoscopes
-        check_compile(options, dev.torch_device)
-        dev._substep = torch.compile(dev._substep, fullgraph=True, dynamic=False, **options)  # type: ignore[method-assign]
-        return True
 
 
 def check_compile(options: dict[str, Any], torch_device: torch.device) -> None:

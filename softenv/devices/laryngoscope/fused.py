@@ -1,0 +1,560 @@
+"""The laryngoscope's control period as one Triton kernel, for the torch twin on a GPU: the float twin of
+:func:`.kernel.control_period` (numba, one device after another) with one GPU thread a device.
+
+The eager tensor engine (:class:`~.tensors.LaryngoscopeTensors`) launches some 14,000 small kernels a
+control period, each reading and writing every device's arrays, so on a GPU it is bound by launches and
+memory, not arithmetic (3 million env-steps/s at best on an H200). Here each device's whole period (some
+20 substeps of collision, arbiter, springs and solver iterations) runs in registers: its state is read
+once and written once. A branch of :func:`.kernel.control_period` is a ``tl.where`` here (both sides are
+computed; the one the device takes is kept), and its skip of the collision for a blade far from the
+incisors (:func:`.kernel._separated`) is gone: the collision finds no contact there, so the result is the
+same. The expressions are :func:`.kernel.control_period`'s, in its order; the kernel is launched without
+fused multiply-add, so where the GPU's ``cos``, ``sin``, ``exp`` round as the host's the result is that
+of the numba kernel bit for bit. ``tests/test_laryngoscope_fused.py`` holds it to the numpy engine bit
+for bit in Triton's interpreter (``TRITON_INTERPRET=1``, on CPU tensors) and to the eager tensor engine
+on a GPU.
+
+Triton reads a Python float argument or literal as float32, so every constant that float32 does not hold
+exactly comes in as a float64 tensor (:func:`constants`), read by index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import astuple
+from typing import Any
+
+import numpy as np
+import torch
+import triton
+import triton.language as tl
+
+from ..contact import TongueContact
+from .incisors import PERSISTENCE, TINY
+from .params import SPRING_LENGTH, LaryngoscopeParams
+from .rigid import HAND_ANCHORS
+from .space import SOLVER_ITERATIONS
+from .tensors import LaryngoscopeTensors
+
+BLOCK = 128            # devices a program (one thread each)
+
+
+def constants(dev: LaryngoscopeTensors) -> torch.Tensor:
+    """The kernel's float64 constants (the layout :func:`_control_period` reads), on the batch's device."""
+    c, s, k = dev.c, dev._teeth.solver, dev._coupling
+    tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]     # 30 values
+    coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]              # 30-37
+    solver = [s.radius, s.friction, s.slop, s.bias_coef, dev._teeth.dt_coef, TINY, 1e-300, SPRING_LENGTH,
+              float("inf")]                                                                       # 38-46
+    anchors = [v for xy in HAND_ANCHORS for v in xy]                                              # 47-50
+    geometry = [np.asarray(a.cpu() if isinstance(a, torch.Tensor) else a, dtype=np.float64).ravel()
+                for a in (s.ends, s.seg_normal, s.local, s.local_normals)]                       # 51-54, 55-56, 57-
+    values = np.concatenate([np.array(tongue + coupling + solver + anchors), *geometry])
+    return torch.as_tensor(values, dtype=torch.float64, device=dev.torch_device)
+
+
+# where :func:`constants` puts each group: the tongue's (:class:`.physics.Constants` flattened) at 0, then
+# the coupling's, the contact's scalars, the springs' hand anchors, the segment's ends and normal, the
+# blade's vertices and their plane normals
+_COUPLING: tl.constexpr = tl.constexpr(30)
+_SOLVER: tl.constexpr = tl.constexpr(38)
+_ANCHORS: tl.constexpr = tl.constexpr(47)
+_ENDS: tl.constexpr = tl.constexpr(51)
+_SEG_NORMAL: tl.constexpr = tl.constexpr(55)
+_LOCAL: tl.constexpr = tl.constexpr(57)
+
+
+@triton.jit
+def _clip(x, low, high):
+    return tl.where(x < low, low, tl.where(x > high, high, x))
+
+
+@triton.jit
+def _max0(x):
+    return tl.where(x > 0.0, x, 0.0)
+
+
+@triton.jit
+def _closest_t(ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    d2 = dx * dx + dy * dy
+    zero = d2 == 0.0
+    q = (dx * (ax + bx) + dy * (ay + by)) / tl.where(zero, 1.0, d2)     # 0/0 kept out, same bits elsewhere
+    return tl.where(zero, 0.0, -_clip(q, -1.0, 1.0))
+
+
+@triton.jit
+def _lerp_t(ax, ay, bx, by, t):
+    ht = 0.5 * t
+    return ax * (0.5 - ht) + bx * (0.5 + ht), ay * (0.5 - ht) + by * (0.5 + ht)
+
+
+@triton.jit
+def _vertex(c, j, ca, sa, px, py):
+    """The blade's vertex ``j`` (a constant or one index a device) in the world."""
+    lx, ly = tl.load(c + _LOCAL + 2 * j), tl.load(c + _LOCAL + 2 * j + 1)
+    return (ca * lx + -sa * ly) + px, (sa * lx + ca * ly) + py
+
+
+@triton.jit
+def _normal(c, j, ca, sa, V: tl.constexpr):
+    """The plane normal of the blade's vertex ``j`` in the world."""
+    lx, ly = tl.load(c + _LOCAL + 2 * V + 2 * j), tl.load(c + _LOCAL + 2 * V + 2 * j + 1)
+    return ca * lx + -sa * ly, sa * lx + ca * ly
+
+
+@triton.jit
+def _end(c, i):
+    """End ``i`` (0 or 1) of the incisors' segment."""
+    return tl.load(c + _ENDS + 2 * i), tl.load(c + _ENDS + 1 + 2 * i)
+
+
+@triton.jit
+def _point(c, i, j, ca, sa, px, py):
+    """The difference's point (blade vertex ``j``) - (segment end ``i``)."""
+    vx, vy = _vertex(c, j, ca, sa, px, py)
+    ex, ey = _end(c, i)
+    return vx - ex, vy - ey
+
+
+@triton.jit
+def _difference(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
+    """The difference's points (blade vertex ``j``) - (segment end ``i``) of every device, as ``(devices,
+    2 VP)`` columns ``i VP + j`` (``VP``: ``V`` rounded up to a power of two), and which columns hold one."""
+    cols = tl.arange(0, 2 * VP)
+    i, j = cols // VP, cols % VP
+    valid = j < V
+    lx = tl.load(c + _LOCAL + 2 * j, valid, 0.0)[None, :]
+    ly = tl.load(c + _LOCAL + 2 * j + 1, valid, 0.0)[None, :]
+    ex, ey = tl.load(c + _ENDS + 2 * i)[None, :], tl.load(c + _ENDS + 1 + 2 * i)[None, :]
+    ca, sa = ca[:, None], sa[:, None]
+    return ((ca * lx + -sa * ly) + px[:, None]) - ex, ((sa * lx + ca * ly) + py[:, None]) - ey, valid[None, :]
+
+
+@triton.jit
+def _hull_side(qx, qy, valid, ax, ay, bx, by):
+    """:func:`.kernel._hull_side`: 1, -1 or 0 for the edge ``a -> b`` of the difference (points ``q``)."""
+    ex, ey = (bx - ax)[:, None], (by - ay)[:, None]
+    side = ex * (qy - ay[:, None]) - ey * (qx - ax[:, None])
+    left = tl.max((valid & ~(side >= 0.0)).to(tl.int32), axis=1) == 0
+    right = tl.max((valid & ~(side <= 0.0)).to(tl.int32), axis=1) == 0
+    return tl.where(left, 1, tl.where(right, -1, 0))
+
+
+@triton.jit
+def _candidate_side(c, k: tl.constexpr, ca, sa, px, py, qx, qy, valid, V: tl.constexpr):
+    """Candidate edge ``k`` of the difference (:func:`.kernel._candidate`): its two ends and hull side."""
+    if k < 2 * V:
+        ax, ay = _point(c, k // V, k % V, ca, sa, px, py)
+        bx, by = _point(c, k // V, (k % V + 1) % V, ca, sa, px, py)
+    else:
+        ax, ay = _point(c, 0, k - 2 * V, ca, sa, px, py)
+        bx, by = _point(c, 1, k - 2 * V, ca, sa, px, py)
+    return ax, ay, bx, by, _hull_side(qx, qy, valid, ax, ay, bx, by)
+
+
+@triton.jit
+def _collide(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
+    """:func:`.kernel._collide` for every device of the program: the normal, which contacts exist, their
+    points (on the segment, on the blade) and features."""
+    radius, tiny = tl.load(c + _SOLVER), tl.load(c + _SOLVER + 5)
+    dqx, dqy, valid = _difference(c, ca, sa, px, py, V, VP)
+    inside = tl.full(px.shape, 1, tl.int1)
+    for k in tl.static_range(3 * V):                    # kernel._cores_overlap
+        ax, ay, bx, by, left = _candidate_side(c, k, ca, sa, px, py, dqx, dqy, valid, V)
+        origin = (bx - ax) * -ay - (by - ay) * -ax
+        inside = inside & ~(((left == 1) & ~(origin > 0.0)) | ((left == -1) & ~(origin < 0.0)))
+    zero = tl.zeros(px.shape, tl.float64)
+    best_d, best_px, best_py, e_dx, e_dy = zero + tl.load(c + _SOLVER + 8), zero, zero, zero, zero
+    best_left = tl.zeros(px.shape, tl.int32)
+    best_ia, best_ja, best_ib, best_jb = best_left, best_left, best_left, best_left
+    for k in tl.static_range(3 * V):
+        ax, ay, bx, by, side = _candidate_side(c, k, ca, sa, px, py, dqx, dqy, valid, V)
+        left = tl.where(inside, side, 0)
+        t = _closest_t(ax, ay, bx, by)
+        qx, qy = _lerp_t(ax, ay, bx, by, t)
+        d = qx * qx + qy * qy
+        better = ~(inside & (left == 0)) & (d < best_d)   # inside the hull only hull edges; the first of equals
+        best_d, best_px, best_py = tl.where(better, d, best_d), tl.where(better, qx, best_px), tl.where(better, qy, best_py)
+        best_left = tl.where(better, left, best_left)
+        e_dx, e_dy = tl.where(better, bx - ax, e_dx), tl.where(better, by - ay, e_dy)
+        if k < 2 * V:
+            best_ia = tl.where(better, k // V, best_ia)
+            best_ja = tl.where(better, k % V, best_ja)
+            best_ib = tl.where(better, k // V, best_ib)
+            best_jb = tl.where(better, (k % V + 1) % V, best_jb)
+        else:
+            best_ia = tl.where(better, 0, best_ia)
+            best_ja = tl.where(better, k - 2 * V, best_ja)
+            best_ib = tl.where(better, 1, best_ib)
+            best_jb = tl.where(better, k - 2 * V, best_jb)
+    flip = tl.where(inside, best_left == 1, e_dy * best_px + -e_dx * best_py < 0.0)
+    m0x, m0y = _point(c, tl.where(flip, best_ib, best_ia), tl.where(flip, best_jb, best_ja), ca, sa, px, py)
+    m1x, m1y = _point(c, tl.where(flip, best_ia, best_ib), tl.where(flip, best_ja, best_jb), ca, sa, px, py)
+    # ClosestPointsNew
+    t = _closest_t(m0x, m0y, m1x, m1y)
+    qx, qy = _lerp_t(m0x, m0y, m1x, m1y, t)
+    rx, ry = m1y - m0y, -(m1x - m0x)
+    inv = 1.0 / (tl.sqrt(rx * rx + ry * ry) + tiny)
+    nx, ny = rx * inv, ry * inv
+    d = nx * qx + ny * qy
+    pair = ~((d <= 0.0) | ((-1.0 < t) & (t < 1.0)))    # a vertex pair
+    d2 = tl.sqrt(qx * qx + qy * qy)
+    inv = 1.0 / (d2 + tiny)
+    nx, ny, d = tl.where(pair, qx * inv, nx), tl.where(pair, qy * inv, ny), tl.where(pair, d2, d)
+    # SupportEdgeForSegment(seg, n) and SupportEdgeForPoly(poly, -n)
+    forward = tl.load(c + _SEG_NORMAL) * nx + tl.load(c + _SEG_NORMAL + 1) * ny > 0.0
+    s_a, s_b = tl.where(forward, 0, 1), tl.where(forward, 1, 0)
+    bx, by = -nx, -ny
+    vx, vy = _vertex(c, 0, ca, sa, px, py)
+    i1p, top = best_left * 0, vx * bx + vy * by
+    for j in tl.static_range(1, V):
+        vx, vy = _vertex(c, j, ca, sa, px, py)
+        v = vx * bx + vy * by
+        i1p, top = tl.where(v > top, j, i1p), tl.where(v > top, v, top)    # the first of equals
+    i0p, i2p = (i1p - 1 + V) % V, (i1p + 1) % V
+    n1x, n1y = _normal(c, i1p, ca, sa, V)
+    n2x, n2y = _normal(c, i2p, ca, sa, V)
+    keep = bx * n1x + by * n1y > bx * n2x + by * n2y
+    q_a, q_b = tl.where(keep, i0p, i1p), tl.where(keep, i1p, i2p)
+    # ContactPoints (the blade has no radius)
+    touching = ((d - radius) - 0.0 <= 0.0) & (d <= radius + 0.0)
+    sax, say = _end(c, s_a)
+    sbx, sby = _end(c, s_b)
+    qax, qay = _vertex(c, q_a, ca, sa, px, py)
+    qbx, qby = _vertex(c, q_b, ca, sa, px, py)
+    d1a, d1b = sax * ny - say * nx, sbx * ny - sby * nx
+    d2a, d2b = qax * ny - qay * nx, qbx * ny - qby * nx
+    e1_denom = 1.0 / (d1b - d1a + tiny)
+    e2_denom = 1.0 / (d2b - d2a + tiny)
+    u = _clip((d2b - d1a) * e1_denom, 0.0, 1.0)
+    v = _clip((d1a - d2a) * e2_denom, 0.0, 1.0)
+    p1x0, p1y0 = nx * radius + (sax * (1.0 - u) + sbx * u), ny * radius + (say * (1.0 - u) + sby * u)
+    p2x0, p2y0 = nx * -0.0 + (qax * (1.0 - v) + qbx * v), ny * -0.0 + (qay * (1.0 - v) + qby * v)
+    exists0 = touching & ((p2x0 - p1x0) * nx + (p2y0 - p1y0) * ny <= 0.0)
+    u = _clip((d2a - d1a) * e1_denom, 0.0, 1.0)
+    v = _clip((d1b - d2a) * e2_denom, 0.0, 1.0)
+    p1x1, p1y1 = nx * radius + (sax * (1.0 - u) + sbx * u), ny * radius + (say * (1.0 - u) + sby * u)
+    p2x1, p2y1 = nx * -0.0 + (qax * (1.0 - v) + qbx * v), ny * -0.0 + (qay * (1.0 - v) + qby * v)
+    exists1 = touching & ((p2x1 - p1x1) * nx + (p2y1 - p1y1) * ny <= 0.0)
+    return (nx, ny, exists0, exists1, p1x0, p1y0, p2x0, p2y0, p1x1, p1y1, p2x1, p2y1,
+            s_a, q_b, s_b, q_a)
+
+
+@triton.jit
+def _tongue(c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+            lat_y, lat_v, hand_lat, anchor, hl):
+    """:func:`.physics.tongue_substep_floats` for every device of the program."""
+    R, h, inv_m, inv_I, h_over_m = tl.load(c + 0), tl.load(c + 1), tl.load(c + 2), tl.load(c + 3), tl.load(c + 4)
+    k, cc, k_t, mu, k_ref = tl.load(c + 5), tl.load(c + 6), tl.load(c + 7), tl.load(c + 8), tl.load(c + 9)
+    damping, step, inv_step = tl.load(c + 10), tl.load(c + 11), tl.load(c + 12)
+    k_rot, c_rot, qa, qb = tl.load(c + 14), tl.load(c + 15), tl.load(c + 16), tl.load(c + 17)
+    hx, hy, tx, ty = tl.load(c + 18), tl.load(c + 19), tl.load(c + 20), tl.load(c + 21)
+    ex = px + ca * hx - sa * hy
+    ey = py + sa * hx + ca * hy
+    dx = (px + ca * tx - sa * ty) - ex
+    dy = (py + sa * tx + ca * ty) - ey
+    t = -(ex * dx + ey * dy) / (dx * dx + dy * dy)
+    t = tl.where(t < 0.0, 0.0, tl.where(t > 1.0, 1.0, t))
+    cx = ex + t * dx
+    cy = ey + t * dy
+    dist = tl.sqrt(cx * cx + cy * cy) + tl.load(c + _SOLVER + 6)
+    touching = dist < R
+    depth = R - dist
+    nx = cx / dist
+    ny = cy / dist
+    rx = cx - px
+    ry = cy - py
+    approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)
+    rn = rx * ny - ry * nx
+    inv_meff = inv_m + rn * rn * inv_I
+    x = _max0(depth) * inv_step
+    i = tl.where(x < top, x.to(tl.int32), top)
+    slope = tl.load(slopes + i)
+    law = tl.load(loads + i) + (depth - i.to(tl.float64) * step) * slope
+    x = depth + h * approach
+    x = _max0(x) * inv_step
+    ahead = tl.load(slopes + tl.where(x < top, x.to(tl.int32), top))
+    slope = tl.where(ahead > slope, ahead, slope)
+    excess = _max0(slope - k_ref)
+    stiff = excess * h + 2.0 * tl.sqrt(excess / inv_meff)
+    qx, qy = ca * qa - sa * qb, sa * qa + ca * qb
+    Fx = k * (gx - px - qx) + cc * (hvx - vx + w * qy)
+    Fy = k * (gy - py - qy) + cc * (hvy - vy - w * qx)
+    tau = qx * Fy - qy * Fx + k_rot * (pitch - a) + c_rot * (hw - w)
+    push = -(Fx * nx + Fy * ny) * inv_m - tau * rn * inv_I
+    beta = stiff * h * inv_meff
+    P = (law + (damping + stiff) * approach + stiff * h * push) / (1.0 + beta)
+    P = tl.where(touching, _max0(P), 0.0)             # off the tongue P is 0
+    fx = tl.where(touching, P * nx, 0.0)
+    fy = tl.where(touching, P * ny, 0.0)
+    torque = tl.where(touching, rx * fy - ry * fx, 0.0)
+    k_s = tl.where(touching, k_t, 0.0)
+    lat_v = (lat_v + h_over_m * (k * (hand_lat - lat_y) + cc * hl - k_s * (lat_y - anchor))) / (1.0 + h_over_m * cc)
+    lat_y = lat_y + h * lat_v
+    stuck = k_s * (lat_y - anchor)
+    limit = mu * P
+    Q = tl.where(stuck < -limit, -limit, tl.where(stuck > limit, limit, stuck))
+    anchor = tl.where(touching, tl.where(Q != stuck, lat_y - Q / k_t, anchor), lat_y)
+    return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
+
+
+@triton.jit
+def _prestep(c, anx, any_, px, py, vx, vy, w, p1x, p1y, p2x, p2y):
+    """The pre-step of one contact (:func:`.incisors.prestep`): its lever, masses, bias and bounce."""
+    m_inv, i_inv, h = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + 1)
+    slop, bias_coef = tl.load(c + _SOLVER + 2), tl.load(c + _SOLVER + 3)
+    r1x, r1y = p1x - 0.0, p1y - 0.0
+    r2x, r2y = p2x - px, p2y - py
+    rcn = r2x * any_ - r2y * anx
+    n_mass = 1.0 / (0.0 + (m_inv + i_inv * rcn * rcn))
+    rct = r2x * anx - r2y * -any_
+    t_mass = 1.0 / (0.0 + (m_inv + i_inv * rct * rct))
+    dist = ((r2x - r1x) + px) * anx + ((r2y - r1y) + py) * any_
+    low = dist + slop
+    bias = -bias_coef * tl.where(0.0 < low, 0.0, low) / h
+    bounce = ((vx + -r2y * w) * anx + (vy + r2x * w) * any_) * (0.0 * 0.0)
+    return r2x, r2y, n_mass, t_mass, bias, bounce
+
+
+@triton.jit
+def _spring(c, s: tl.constexpr, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w):
+    """Spring ``s``'s explicit impulse: the new velocities and what its implicit damping reads."""
+    m_inv, i_inv, h = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + 1)
+    k_lin, c_lin = tl.load(c + _COUPLING + 4), tl.load(c + _COUPLING + 5)
+    ax, ay = tl.load(c + _ANCHORS + 2 * s), tl.load(c + _ANCHORS + 1 + 2 * s)
+    r1x, r1y = cp * ax + -sp * ay, sp * ax + cp * ay
+    dx, dy = (px + gqx) - (gx + r1x), (py + gqy) - (gy + r1y)
+    dist = tl.sqrt(dx * dx + dy * dy)
+    inv = 1.0 / dist
+    nx, ny = dx * inv, dy * inv
+    rcn = gqx * ny - gqy * nx
+    kk = m_inv + i_inv * rcn * rcn
+    j = (tl.load(c + _SOLVER + 7) - dist) * k_lin * h
+    vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
+    w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
+    return vx, vy, w, r1x, r1y, nx, ny, 1.0 / kk, 1.0 - tl.exp(-c_lin * h * kk), j
+
+
+@triton.jit
+def _contact_impulse(c, on, rx, ry, n_mass, t_mass, bias, bounce, j_bias, jn, jt, anx, any_,
+                     vx, vy, w, bvx, bvy, bw):
+    """One iteration of one contact's impulse (:func:`.incisors.apply_impulse`), where ``on``."""
+    m_inv, i_inv, friction = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + _SOLVER + 1)
+    vbn = (bvx + -ry * bw) * anx + (bvy + rx * bw) * any_
+    vr_x, vr_y = vx + -ry * w, vy + rx * w
+    vrn = vr_x * anx + vr_y * any_
+    vrt = vr_x * -any_ + vr_y * anx
+    jbn = (bias - vbn) * n_mass
+    jb = _max0(j_bias + jbn)
+    jn_acc = _max0(jn + -(bounce + vrn) * n_mass)
+    jt_max = friction * jn_acc
+    x = jt + -vrt * t_mass
+    x = tl.where(x > -jt_max, x, -jt_max)
+    jt_acc = tl.where(x < jt_max, x, jt_max)
+    bx, by = anx * (jb - j_bias), any_ * (jb - j_bias)
+    dn, dt = jn_acc - jn, jt_acc - jt
+    jx, jy = anx * dn - any_ * dt, anx * dt + any_ * dn
+    new_bvx, new_bvy = bvx + bx * m_inv, bvy + by * m_inv
+    new_bw = bw + i_inv * (rx * by - ry * bx)
+    new_vx, new_vy = vx + jx * m_inv, vy + jy * m_inv
+    new_w = w + i_inv * (rx * jy - ry * jx)
+    return (tl.where(on, new_vx, vx), tl.where(on, new_vy, vy), tl.where(on, new_w, w),
+            tl.where(on, new_bvx, bvx), tl.where(on, new_bvy, bvy), tl.where(on, new_bw, bw),
+            tl.where(on, jb, j_bias), tl.where(on, jn_acc, jn), tl.where(on, jt_acc, jt))
+
+
+@triton.jit
+def _spring_damping(c, r1x, r1y, nx, ny, n_mass, v_coef, target, acc, gqx, gqy, hvx, hvy, hw, vx, vy, w):
+    """One iteration of one spring's implicit damping."""
+    m_inv, i_inv = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1)
+    rel_x = (vx + -gqy * w) - (hvx + -r1y * hw)
+    rel_y = (vy + gqx * w) - (hvy + r1x * hw)
+    vrn = rel_x * nx + rel_y * ny
+    v_damp = (target - vrn) * v_coef
+    target = vrn + v_damp
+    j = (acc + v_damp * n_mass) - acc
+    acc = acc + j
+    vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
+    w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
+    return vx, vy, w, target, acc
+
+
+@triton.jit
+def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, count, c, loads, slopes, top,
+                    iterations, persistence, V: tl.constexpr, VP: tl.constexpr, BLOCK_SIZE: tl.constexpr):
+    """``count`` substeps of every device (the rows of the state tensors, updated in place) with the hands
+    commanded at ``command`` ``(4, n)``: :func:`.kernel.control_period`, one thread a device."""
+    rows = tl.program_id(0) * BLOCK_SIZE + tl.arange(0, BLOCK_SIZE)
+    live = rows < n
+    px, py, a = tl.load(blade + 6 * rows, live), tl.load(blade + 6 * rows + 1, live), tl.load(blade + 6 * rows + 2, live)
+    vx, vy, w = tl.load(blade + 6 * rows + 3, live), tl.load(blade + 6 * rows + 4, live), tl.load(blade + 6 * rows + 5, live)
+    gx, gy, pitch = tl.load(hand + 3 * rows, live), tl.load(hand + 3 * rows + 1, live), tl.load(hand + 3 * rows + 2, live)
+    lat_y, lat_v = tl.load(lateral + 4 * rows, live), tl.load(lateral + 4 * rows + 1, live)
+    hand_lat, anchor = tl.load(lateral + 4 * rows + 2, live), tl.load(lateral + 4 * rows + 3, live)
+    vX, vY = tl.load(command + rows, live), tl.load(command + n + rows, live)
+    spin, v_lat = tl.load(command + 2 * n + rows, live), tl.load(command + 3 * n + rows, live)
+    h, m_inv, i_inv = tl.load(c + 1), tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1)
+    qx, qy = tl.load(c + _COUPLING + 2), tl.load(c + _COUPLING + 3)
+    k_rot, c_rot, dt_coef = tl.load(c + _COUPLING + 6), tl.load(c + _COUPLING + 7), tl.load(c + _SOLVER + 4)
+    i_sum = 1.0 / i_inv
+    w_coef = 1.0 - tl.exp(-c_rot * h * i_inv)
+    zero = tl.zeros([BLOCK_SIZE], tl.float64)
+    no = tl.zeros([BLOCK_SIZE], tl.int1)
+    none = tl.zeros([BLOCK_SIZE], tl.int32)
+    # the arbiter with the incisors: it starts empty at every period (no contact state crosses one)
+    alive, ticks, anx, any_ = no, none, zero, zero
+    ex0, ex1, f00, f01, f10, f11 = no, no, none, none, none, none
+    jn0, jn1, jt0, jt1 = zero, zero, zero, zero
+    r2x0, r2y0, r2x1, r2y1 = zero, zero, zero, zero
+    n_mass0, t_mass0, bias0, bounce0 = zero, zero, zero, zero
+    n_mass1, t_mass1, bias1, bounce1 = zero, zero, zero, zero
+    bvx, bvy, bw, impulse = zero, zero, zero, zero
+    hvx, hvy, hw, hl, P, Q, cx, cy = zero, zero, zero, zero, zero, zero, zero, zero
+    ca, sa = tl.cos(a), tl.sin(a)
+    for _ in range(count):
+        hvx = _clip(vX, (tl.load(c + 22) - gx) / h, (tl.load(c + 26) - gx) / h)
+        hvy = _clip(vY, (tl.load(c + 23) - gy) / h, (tl.load(c + 27) - gy) / h)
+        hw = _clip(spin, (tl.load(c + 24) - pitch) / h, (tl.load(c + 28) - pitch) / h)
+        hl = _clip(v_lat, (tl.load(c + 25) - hand_lat) / h, (tl.load(c + 29) - hand_lat) / h)
+        hand_lat = hand_lat + h * hl
+        fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
+            c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+            lat_y, lat_v, hand_lat, anchor, hl)
+        # rigid.coupling_step: 1. positions, spending the contact's bias velocities
+        gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
+        px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
+        bvx, bvy, bw = zero, zero, zero
+        ca, sa, cp, sp = tl.cos(a), tl.sin(a), tl.cos(pitch), tl.sin(pitch)
+        # incisors.prestep: collide, update the arbiter, pre-step its contacts
+        (nnx, nny, new0, new1, p1x0, p1y0, p2x0, p2y0, p1x1, p1y1, p2x1, p2y1,
+         g00, g01, g10, g11) = _collide(c, ca, sa, px, py, V, VP)
+        touching = new0 | new1
+        # a new contact keeps the impulses of an old one with its features (the later old one wins)
+        same00 = alive & ex0 & (g00 == f00) & (g01 == f01)
+        same01 = alive & ex1 & (g00 == f10) & (g01 == f11)
+        same10 = alive & ex0 & (g10 == f00) & (g11 == f01)
+        same11 = alive & ex1 & (g10 == f10) & (g11 == f11)
+        jn_new0 = tl.where(same01, jn1, tl.where(same00, jn0, zero))
+        jt_new0 = tl.where(same01, jt1, tl.where(same00, jt0, zero))
+        jn_new1 = tl.where(same11, jn1, tl.where(same10, jn0, zero))
+        jt_new1 = tl.where(same11, jt1, tl.where(same10, jt0, zero))
+        first = touching & ~(alive & (ticks == 0))
+        ticks = tl.where(touching, 0, ticks + 1)
+        alive = touching | (alive & (ticks < persistence))
+        # the arbiter's normal and pre-step: read only while touching
+        ex0, ex1 = tl.where(touching, new0, ex0), tl.where(touching, new1, ex1)
+        f00, f01 = tl.where(touching, g00, f00), tl.where(touching, g01, f01)
+        f10, f11 = tl.where(touching, g10, f10), tl.where(touching, g11, f11)
+        jn0, jt0 = tl.where(touching, jn_new0, jn0), tl.where(touching, jt_new0, jt0)
+        jn1, jt1 = tl.where(touching, jn_new1, jn1), tl.where(touching, jt_new1, jt1)
+        anx, any_ = tl.where(touching, nnx, anx), tl.where(touching, nny, any_)
+        r2x, r2y, n_mass, t_mass, bias, bounce = _prestep(c, anx, any_, px, py, vx, vy, w,
+                                                          p1x0, p1y0, p2x0, p2y0)
+        r2x0, r2y0 = tl.where(touching, r2x, r2x0), tl.where(touching, r2y, r2y0)
+        n_mass0, t_mass0 = tl.where(touching, n_mass, n_mass0), tl.where(touching, t_mass, t_mass0)
+        bias0, bounce0 = tl.where(touching, bias, bias0), tl.where(touching, bounce, bounce0)
+        r2x, r2y, n_mass, t_mass, bias, bounce = _prestep(c, anx, any_, px, py, vx, vy, w,
+                                                          p1x1, p1y1, p2x1, p2y1)
+        r2x1, r2y1 = tl.where(touching, r2x, r2x1), tl.where(touching, r2y, r2y1)
+        n_mass1, t_mass1 = tl.where(touching, n_mass, n_mass1), tl.where(touching, t_mass, t_mass1)
+        bias1, bounce1 = tl.where(touching, bias, bias1), tl.where(touching, bounce, bounce1)
+        j_bias0, j_bias1 = zero, zero
+        # 2. the springs' explicit impulses
+        gqx, gqy = ca * qx + -sa * qy, sa * qx + ca * qy
+        vx, vy, w, s_r1x0, s_r1y0, s_nx0, s_ny0, s_mass0, s_coef0, s_acc0 = _spring(
+            c, 0, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
+        vx, vy, w, s_r1x1, s_r1y1, s_nx1, s_ny1, s_mass1, s_coef1, s_acc1 = _spring(
+            c, 1, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
+        s_target0, s_target1 = zero, zero
+        j_rot = ((pitch - a) - 0.0) * k_rot * h
+        w = w + j_rot * i_inv
+        target_wrn = zero
+        # 3. velocities
+        vx, vy = vx * 1.0 + (0.0 + fx * m_inv) * h, vy * 1.0 + (0.0 + fy * m_inv) * h
+        w = w * 1.0 + torque * i_inv * h
+        cached = touching & ~first                        # incisors.apply_cached
+        jx, jy = (anx * jn0 - any_ * jt0) * dt_coef, (anx * jt0 + any_ * jn0) * dt_coef
+        on = cached & ex0
+        vx, vy = tl.where(on, vx + jx * m_inv, vx), tl.where(on, vy + jy * m_inv, vy)
+        w = tl.where(on, w + i_inv * (r2x0 * jy - r2y0 * jx), w)
+        jx, jy = (anx * jn1 - any_ * jt1) * dt_coef, (anx * jt1 + any_ * jn1) * dt_coef
+        on = cached & ex1
+        vx, vy = tl.where(on, vx + jx * m_inv, vx), tl.where(on, vy + jy * m_inv, vy)
+        w = tl.where(on, w + i_inv * (r2x1 * jy - r2y1 * jx), w)
+        # 4. the implicit impulses: the contact's, then the springs' in the order added
+        for _pass in range(iterations):
+            vx, vy, w, bvx, bvy, bw, j_bias0, jn0, jt0 = _contact_impulse(
+                c, touching & ex0, r2x0, r2y0, n_mass0, t_mass0, bias0, bounce0, j_bias0, jn0, jt0, anx, any_,
+                vx, vy, w, bvx, bvy, bw)
+            vx, vy, w, bvx, bvy, bw, j_bias1, jn1, jt1 = _contact_impulse(
+                c, touching & ex1, r2x1, r2y1, n_mass1, t_mass1, bias1, bounce1, j_bias1, jn1, jt1, anx, any_,
+                vx, vy, w, bvx, bvy, bw)
+            vx, vy, w, s_target0, s_acc0 = _spring_damping(c, s_r1x0, s_r1y0, s_nx0, s_ny0, s_mass0, s_coef0,
+                                                           s_target0, s_acc0, gqx, gqy, hvx, hvy, hw, vx, vy, w)
+            vx, vy, w, s_target1, s_acc1 = _spring_damping(c, s_r1x1, s_r1y1, s_nx1, s_ny1, s_mass1, s_coef1,
+                                                           s_target1, s_acc1, gqx, gqy, hvx, hvy, hw, vx, vy, w)
+            wrn = hw - w
+            w_damp = (target_wrn - wrn) * w_coef
+            target_wrn = wrn + w_damp
+            j = j_rot - (j_rot - w_damp * i_sum)
+            j_rot = j_rot - j
+            w = w - j * i_inv
+        # the incisors' total impulse this substep (cpArbiterTotalImpulse)
+        tx = tl.where(ex0, zero + (anx * jn0 - any_ * jt0), zero)
+        ty = tl.where(ex0, zero + (anx * jt0 + any_ * jn0), zero)
+        tx = tl.where(ex1, tx + (anx * jn1 - any_ * jt1), tx)
+        ty = tl.where(ex1, ty + (anx * jt1 + any_ * jn1), ty)
+        impulse = tl.where(alive & (ticks == 0), impulse + tl.sqrt(tx * tx + ty * ty), impulse)
+    tl.store(blade + 6 * rows, px, live)
+    tl.store(blade + 6 * rows + 1, py, live)
+    tl.store(blade + 6 * rows + 2, a, live)
+    tl.store(blade + 6 * rows + 3, vx, live)
+    tl.store(blade + 6 * rows + 4, vy, live)
+    tl.store(blade + 6 * rows + 5, w, live)
+    tl.store(hand + 3 * rows, gx, live)
+    tl.store(hand + 3 * rows + 1, gy, live)
+    tl.store(hand + 3 * rows + 2, pitch, live)
+    tl.store(lateral + 4 * rows, lat_y, live)
+    tl.store(lateral + 4 * rows + 1, lat_v, live)
+    tl.store(lateral + 4 * rows + 2, hand_lat, live)
+    tl.store(lateral + 4 * rows + 3, anchor, live)
+    tl.store(hand_v + 4 * rows, hvx, live)
+    tl.store(hand_v + 4 * rows + 1, hvy, live)
+    tl.store(hand_v + 4 * rows + 2, hw, live)
+    tl.store(hand_v + 4 * rows + 3, hl, live)
+    tl.store(contact + 4 * rows, P, live)
+    tl.store(contact + 4 * rows + 1, Q, live)
+    tl.store(contact + 4 * rows + 2, cx, live)
+    tl.store(contact + 4 * rows + 3, cy, live)
+    tl.store(incisor + rows, impulse / (count * h), live)
+
+
+class LaryngoscopeFused(LaryngoscopeTensors):
+    """:class:`~.tensors.LaryngoscopeTensors` with each control period run by one Triton kernel
+    (:func:`_control_period`), the state updated in place: the same state and readings, one launch a
+    step. Triton compiles the kernel at its first launch in a process (cached on disk by Triton)."""
+
+    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
+                 torch_device: torch.device | str = "cpu") -> None:
+        super().__init__(params, contact, n, torch_device)
+        self._constants = constants(self)
+        self._loads, self._slopes = (x.contiguous() for x in (self._loads, self._slopes))
+        self._top = int(self.c.top)
+        self._vertices = int(self._teeth.solver.local.shape[0])
+
+    def compile_substep(self, options: dict[str, Any]) -> None:
+        raise ValueError(f"compile_options={options!r}: the fused engine (device.batch_engine='compiled' on CUDA) runs "
+                         "a control period as one Triton kernel, with nothing left to compile; record the step with "
+                         "cuda_graph=True, or pass device={'batch_engine': 'numpy'} to compile the tensor engine's "
+                         "substep")
+
+    def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
+        command = torch.stack(torch.broadcast_tensors(vX, vY, spin, v_lat)).to(torch.float64).contiguous()
+        grid = (triton.cdiv(self.n, BLOCK),)
+        _control_period[grid](self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor,
+                              command, self.n, count, self._constants, self._loads, self._slopes, self._top,
+                              SOLVER_ITERATIONS, PERSISTENCE, V=self._vertices,
+                              VP=triton.next_power_of_2(self._vertices), BLOCK_SIZE=BLOCK,
+                              enable_fp_fusion=False)
+        self._touched.fill_(False)                  # the kernel starts every device's contact afresh
+        self._forget()

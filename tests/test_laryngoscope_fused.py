@@ -1,0 +1,89 @@
+"""The laryngoscope's fused engine (softenv.devices.laryngoscope.fused: a control period as one Triton
+kernel) against the numpy array engine, bit for bit in Triton's interpreter on CPU (on a GPU, to the
+tensor engine's bound: tests/test_torch_laryngoscope.py); and the engine the torch twin picks."""
+
+import importlib.util
+import os
+import subprocess
+import sys
+import textwrap
+
+import gymnasium as gym
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from softenv.devices.laryngoscope.part_tensors import tensor_engine  # noqa: E402
+from softenv.devices.laryngoscope.tensors import LaryngoscopeTensors  # noqa: E402
+
+HAS_TRITON = importlib.util.find_spec("triton") is not None
+
+# Periods of a rollout of the numpy engine, each stepped again by the fused kernel from the state before
+# it: the kernel's engine keeps no contact state across periods, so the state and the action fix the period.
+INTERPRETED = textwrap.dedent("""
+    import numpy as np, torch
+    from softenv.devices.laryngoscope.batch import LaryngoscopeArrays
+    from softenv.devices.laryngoscope.fused import LaryngoscopeFused
+    from softenv.devices.laryngoscope.part import laryngoscope_parts
+    from softenv.envs import HAPTIC_SCENES
+    from softenv.envs.config import scene_config
+    from softenv.envs.world import World
+
+    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], {}))
+    parts = laryngoscope_parts(world.scene, world.config)
+    n = 4
+    actions = np.random.default_rng(4).uniform(-1, 1, (100, n, 4))
+    actions[:24, :, 1] = np.abs(actions[:24, :, 1])          # pressing the tongue
+    actions[24:72, :2] = [1.0, 0.0, 0.0, 1.0]                  # two devices inserting, levering on the incisors
+    ref, fused = LaryngoscopeArrays(*parts, n), LaryngoscopeFused(*parts, n)
+    rollout = []
+    for a in actions:
+        before = ref.state()
+        ref.control_step(a)
+        rollout.append((before, a, ref.state(), ref.incisor_force.copy(), ref.observation()))
+    incisors = [k for k, r in enumerate(rollout) if (r[3] > 0).any()]
+    tongue = [k for k, r in enumerate(rollout) if (r[2].contact[:, 0] > 0).any() and k not in incisors]
+    assert incisors and tongue, (incisors, tongue)
+    for k in (incisors[0], incisors[-1], tongue[0], len(rollout) - 1):
+        before, a, after, incisor, observation = rollout[k]
+        fused.load_state(before)
+        fused.control_step(torch.as_tensor(a))
+        state = fused.state()
+        for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
+            assert np.array_equal(getattr(state, field), getattr(after, field)), (k, field)
+        assert np.array_equal(fused.incisor_force.numpy(), incisor), k
+        assert np.array_equal(fused.observation().numpy(), observation), k
+    print("periods", incisors[0], incisors[-1], tongue[0], len(rollout) - 1)
+""")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HAS_TRITON, reason="needs triton, which comes with torch's CUDA builds (or pip install triton)")
+def test_the_fused_kernel_steps_as_the_numpy_engine_bit_for_bit_in_the_interpreter():
+    """Triton's interpreter runs the kernel on CPU with numpy's operations, so it must reproduce the numpy
+    engine (which equals the single pymunk device) bit for bit: a period pressing the tongue, the first
+    and last levering on the incisors, and a random one; state, incisor force and observation."""
+    run = subprocess.run([sys.executable, "-c", INTERPRETED], env={**os.environ, "TRITON_INTERPRET": "1"},
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.startswith("periods")
+
+
+def test_the_torch_twin_picks_the_engine_batch_engine_and_the_device_name():
+    """``compiled`` (the default) is the fused kernel on CUDA only; ``numpy`` the tensor engine everywhere;
+    ``pymunk`` has no tensor form and is refused by name, also through gym.make_vec."""
+    assert tensor_engine("compiled", torch.device("cpu")) is LaryngoscopeTensors
+    assert tensor_engine("numpy", torch.device("cuda")) is LaryngoscopeTensors
+    if HAS_TRITON and torch.cuda.is_available():
+        assert tensor_engine("compiled", torch.device("cuda")).__name__ == "LaryngoscopeFused"
+    with pytest.raises(ValueError, match=r"device.batch_engine='pymunk' has no torch engine"):
+        gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                     backend="torch", device={"batch_engine": "pymunk"})
+
+
+@pytest.mark.skipif(not (HAS_TRITON and torch.cuda.is_available()), reason="the fused engine runs on CUDA devices")
+def test_the_fused_engine_refuses_compile_options_by_name():
+    """One kernel leaves nothing to compile. (Its recorded step: tests/test_torch_laryngoscope.py.)"""
+    with pytest.raises(ValueError, match="the fused engine .* runs a control period as one Triton kernel"):
+        gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=4, vectorization_mode="vector_entry_point",
+                     backend="torch", torch_device="cuda", target_draw="device", compile_options={})
