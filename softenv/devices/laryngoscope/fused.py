@@ -37,21 +37,6 @@ from .tensors import LaryngoscopeTensors
 
 BLOCK = 128            # devices a program (one thread each)
 
-
-def constants(dev: LaryngoscopeTensors) -> torch.Tensor:
-    """The kernel's float64 constants (the layout :func:`_control_period` reads), on the batch's device."""
-    c, s, k = dev.c, dev._teeth.solver, dev._coupling
-    tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]     # 30 values
-    coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]              # 30-37
-    solver = [s.radius, s.friction, s.slop, s.bias_coef, dev._teeth.dt_coef, TINY, 1e-300, SPRING_LENGTH,
-              float("inf")]                                                                       # 38-46
-    anchors = [v for xy in HAND_ANCHORS for v in xy]                                              # 47-50
-    geometry = [np.asarray(a.cpu() if isinstance(a, torch.Tensor) else a, dtype=np.float64).ravel()
-                for a in (s.ends, s.seg_normal, s.local, s.local_normals)]                       # 51-54, 55-56, 57-
-    values = np.concatenate([np.array(tongue + coupling + solver + anchors), *geometry])
-    return torch.as_tensor(values, dtype=torch.float64, device=dev.torch_device)
-
-
 # where :func:`constants` puts each group: the tongue's (:class:`.physics.Constants` flattened) at 0, then
 # the coupling's, the contact's scalars, the springs' hand anchors, the segment's ends and normal, the
 # blade's vertices and their plane normals
@@ -61,6 +46,22 @@ _ANCHORS: tl.constexpr = tl.constexpr(47)
 _ENDS: tl.constexpr = tl.constexpr(51)
 _SEG_NORMAL: tl.constexpr = tl.constexpr(55)
 _LOCAL: tl.constexpr = tl.constexpr(57)
+
+
+def constants(dev: LaryngoscopeTensors) -> torch.Tensor:
+    """The kernel's float64 constants (the layout :func:`_control_period` reads), on the batch's device."""
+    c, s, k = dev.c, dev._teeth.solver, dev._coupling
+    tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]
+    coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]
+    solver = [s.radius, s.friction, s.slop, s.bias_coef, dev._teeth.dt_coef, TINY, 1e-300, SPRING_LENGTH,
+              float("inf")]
+    anchors = [v for xy in HAND_ANCHORS for v in xy]
+    geometry = [np.asarray(a.cpu() if isinstance(a, torch.Tensor) else a, dtype=np.float64).ravel()
+                for a in (s.ends, s.seg_normal, s.local, s.local_normals)]
+    groups = [np.array(tongue), np.array(coupling), np.array(solver), np.array(anchors), *geometry]
+    starts = np.cumsum([0] + [len(g) for g in groups])
+    assert [int(x) for x in starts[1:7]] == [x.value for x in (_COUPLING, _SOLVER, _ANCHORS, _ENDS, _SEG_NORMAL, _LOCAL)]
+    return torch.as_tensor(np.concatenate(groups), dtype=torch.float64, device=dev.torch_device)
 
 
 @triton.jit
