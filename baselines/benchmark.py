@@ -535,15 +535,20 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
     if not scenes:
         axes.flat[0].axis("off")
         axes.flat[0].text(0.5, 0.5, "no agents in this run", ha="center", transform=axes.flat[0].transAxes)
-    seeds = {algo: max((len(curves.get((s, algo), [])) for s in scenes), default=0) for algo in plan.agents}
-    handles = [plt.Line2D([], [], color=colours[a], label=f"{a} ({seeds[a]} seed{'s' if seeds[a] != 1 else ''})")
-               for a in plan.agents if seeds[a]]
+    seeds = {algo: [len(curves[s, algo]) for s in scenes if curves.get((s, algo))] for algo in plan.agents}
+    handles = [plt.Line2D([], [], color=colours[a], label=seed_label(a, seeds[a])) for a in plan.agents if seeds[a]]
     ncol = _legend_columns(fig, len(handles))
     if handles:
         fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
     _suptitle(fig, "learning curves (mean, 95 % band over seeds)", command)
     fig.tight_layout(rect=(0, _legend_room(fig, len(handles), ncol), 1, 1))
     return fig
+
+
+def seed_label(agent: str, counts: list[int]) -> str:
+    """A legend entry: the agent and its seeds a panel (a range where scenes differ, as 3 and 5)."""
+    low, high = min(counts), max(counts)
+    return f"{agent} ({low if low == high else f'{low}-{high}'} seed{'s' if high != 1 else ''})"
 
 
 def _legend_columns(fig: Any, entries: int) -> int:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run
+from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run, seed_label
 from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
 from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
@@ -379,3 +379,10 @@ def test_compare_profiles_name_their_scenes_seeds_budgets_and_report():
     assert stem == "benchmark_quick" and quick.episodes == 7 and quick.timesteps["ppo"] == 50_000
     with pytest.raises(SystemExit):
         parser.parse_args(["compare", "--quick", "--haptic"])
+
+
+def test_the_learning_curves_legend_counts_each_agents_seeds_as_its_panels_draw_them():
+    """The full plan trains 5 seeds on two scenes and 3 on the others: the legend says 3-5, not 5."""
+    assert seed_label("ppo", [5, 3, 3]) == "ppo (3-5 seeds)"
+    assert seed_label("sac", [3, 3]) == "sac (3 seeds)"
+    assert seed_label("td3", [1]) == "td3 (1 seed)"
