@@ -6,7 +6,6 @@ the SB3 adapter against the twin it wraps (section ``sb3``); the torch backend b
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import itertools
 import json
 import os
@@ -366,8 +365,10 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     # on CPU the tensor engine's eager row alone (bench_torch times its compiled substep there: a compile takes
     # minutes); on CUDA the fused kernel (the default) and the tensor engine, each eager and recorded
+    from ..devices.laryngoscope.part_tensors import fused_available  # torch and pymunk: the rl extra
+
     engines = [("tensor engine", "numpy")]
-    if device == "cuda" and importlib.util.find_spec("triton") is not None:
+    if fused_available(torch.device(device)):
         engines.insert(0, ("fused kernel", "compiled"))
     best: tuple[float, str] = (0.0, "")
     for (engine, batch_engine), graphed in itertools.product(engines, [False, True] if device == "cuda" else [False]):

@@ -25,11 +25,16 @@ def tensor_engine(batch_engine: str, torch_device: torch.device) -> type[Laryngo
         raise ValueError(f"device.batch_engine={batch_engine!r} has no torch engine: the torch twin takes 'compiled' "
                          f"(a Triton kernel on CUDA) or 'numpy' (the tensor engine); {list(BATCH_ENGINES)} are the "
                          "numpy twin's")
-    if batch_engine == "compiled" and torch_device.type == "cuda" and importlib.util.find_spec("triton") is not None:
+    if batch_engine == "compiled" and fused_available(torch_device):
         from .fused import LaryngoscopeFused          # triton: optional, for CUDA devices only
 
         return LaryngoscopeFused
     return LaryngoscopeTensors
+
+
+def fused_available(torch_device: torch.device) -> bool:
+    """Whether the fused Triton engine runs on ``torch_device``: a CUDA device, with triton installed."""
+    return torch_device.type == "cuda" and importlib.util.find_spec("triton") is not None
 
 
 class LaryngoscopeTensorPart:
