@@ -3,6 +3,7 @@ kernel) against the numpy array engine, bit for bit in Triton's interpreter on C
 tensor engine's bound: tests/test_torch_laryngoscope.py); and the engine the torch twin picks."""
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -21,11 +22,13 @@ HAS_TRITON = importlib.util.find_spec("triton") is not None
 # Periods of a rollout of the numpy engine, each stepped again by the fused kernel from the state before
 # it: the kernel's engine keeps no contact state across periods, so the state and the action fix the period.
 INTERPRETED = textwrap.dedent("""
+    import json, sys
     import numpy as np, torch
     from softenv import _ops
     # the interpreter's tl.exp is numpy's, which on some CPUs differs from the C library's exp that the
     # numpy engine calls in its last bit: here both use numpy's, so the test sees the kernel's arithmetic
     _ops.ArrayOps.exp = staticmethod(np.exp)
+    from softenv.devices.laryngoscope import incisors
     from softenv.devices.laryngoscope.batch import LaryngoscopeArrays
     from softenv.devices.laryngoscope.fused import LaryngoscopeFused
     from softenv.devices.laryngoscope.part import laryngoscope_parts
@@ -33,22 +36,33 @@ INTERPRETED = textwrap.dedent("""
     from softenv.envs.config import scene_config
     from softenv.envs.world import World
 
-    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], {}))
+    overlaps = []                      # per collision of the numpy engine: whether the cores overlapped
+    hull_sides = incisors._hull_sides
+    def watched(*args):
+        left, inside = hull_sides(*args)
+        overlaps.append(bool(np.any(inside)))
+        return left, inside
+    incisors._hull_sides = watched
+
+    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], json.loads(sys.argv[1])))
     parts = laryngoscope_parts(world.scene, world.config)
     n = 4
     actions = np.random.default_rng(4).uniform(-1, 1, (100, n, 4))
     actions[:24, :, 1] = np.abs(actions[:24, :, 1])          # pressing the tongue
     actions[24:72, :2] = [1.0, 0.0, 0.0, 1.0]                  # two devices inserting, levering on the incisors
     ref, fused = LaryngoscopeArrays(*parts, n), LaryngoscopeFused(*parts, n)
-    rollout = []
+    rollout, sunk = [], []
     for a in actions:
         before = ref.state()
+        overlaps.clear()
         ref.control_step(a)
         rollout.append((before, a, ref.state(), ref.incisor_force.copy(), ref.observation()))
+        sunk.append(any(overlaps))
     incisors = [k for k, r in enumerate(rollout) if (r[3] > 0).any()]
     tongue = [k for k, r in enumerate(rollout) if (r[2].contact[:, 0] > 0).any() and k not in incisors]
+    sunk = [k for k, x in enumerate(sunk) if x]
     assert incisors and tongue, (incisors, tongue)
-    for k in (incisors[0], incisors[-1], tongue[0], len(rollout) - 1):
+    for k in sorted({incisors[0], incisors[-1], tongue[0], *sunk[:1], len(rollout) - 1}):
         before, a, after, incisor, observation = rollout[k]
         fused.load_state(before)
         fused.control_step(torch.as_tensor(a))
@@ -57,20 +71,49 @@ INTERPRETED = textwrap.dedent("""
             assert np.array_equal(getattr(state, field), getattr(after, field)), (k, field)
         assert np.array_equal(fused.incisor_force.numpy(), incisor), k
         assert np.array_equal(fused.observation().numpy(), observation), k
-    print("periods", incisors[0], incisors[-1], tongue[0], len(rollout) - 1)
+    print(json.dumps({"incisors": incisors[0], "tongue": tongue[0], "sunk": sunk[:1]}))
 """)
+
+# the default scene, and softenv bench's light blade driven fast, which sinks it into the incisors until
+# their cores overlap (tests/test_laryngoscope_arrays.py): the collision's other branch
+CORNERS = {"default": {}, "fast": {"device": {"max_hand_speed": 5.0, "blade_mass": 0.01, "coupling_damping": 150.0}}}
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not HAS_TRITON, reason="needs triton, which comes with torch's CUDA builds (or pip install triton)")
-def test_the_fused_kernel_steps_as_the_numpy_engine_bit_for_bit_in_the_interpreter():
+@pytest.mark.parametrize("corner", CORNERS)
+def test_the_fused_kernel_steps_as_the_numpy_engine_bit_for_bit_in_the_interpreter(corner):
     """Triton's interpreter runs the kernel on CPU with numpy's operations, so it must reproduce the numpy
     engine (which equals the single pymunk device) bit for bit: a period pressing the tongue, the first
-    and last levering on the incisors, and a random one; state, incisor force and observation."""
-    run = subprocess.run([sys.executable, "-c", INTERPRETED], env={**os.environ, "TRITON_INTERPRET": "1"},
-                         capture_output=True, text=True, timeout=900)
+    and last levering on the incisors, the first with the blade sunk into them (the fast corner), and the
+    last; state, incisor force and observation."""
+    run = subprocess.run([sys.executable, "-c", INTERPRETED, json.dumps(CORNERS[corner])],
+                         env={**os.environ, "TRITON_INTERPRET": "1"}, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
-    assert run.stdout.startswith("periods")
+    checked = json.loads(run.stdout)
+    assert bool(checked["sunk"]) == (corner == "fast"), checked
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not HAS_TRITON, reason="needs triton, which comes with torch's CUDA builds (or pip install triton)")
+def test_the_fused_kernel_compiles_for_hopper_without_a_gpu(tmp_path):
+    """Triton compiles the kernel ahead of time for sm_90 (H100, H200) with the arguments the engine
+    launches it with, and ptxas (shipped with Triton) assembles it: what Triton would refuse on the GPU
+    (a loop-carried value changing type, a constant it cannot type) fails here. One thread a device shares
+    nothing with another, so the kernel uses no shared memory; its loops are the substeps and, inside them,
+    the solver's iterations."""
+    script = os.path.join(os.path.dirname(__file__), "..", "scripts", "fused_kernel_profile.py")
+    run = subprocess.run([sys.executable, script, "--out", str(tmp_path)], capture_output=True, text=True,
+                         timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = json.loads((tmp_path / "fused_kernel_sm90.json").read_text())
+    assert report["shared_bytes"] == 0, report
+    assert 0 < report["registers"] <= 255, report
+    loops = [x for x in report["loops"] if x["start"] != "kernel"]
+    substeps, solver = sorted(loops, key=lambda x: -x["instructions"])[:2]
+    assert int(substeps["start"], 16) < int(solver["start"], 16) <= int(solver["end"], 16) < int(substeps["end"], 16)
+    assert solver["fp64"] > 0, report
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fused_kernel_sm90.json", "fused_kernel_sm90.md"]
 
 
 def test_the_torch_twin_picks_the_engine_batch_engine_and_the_device_name():

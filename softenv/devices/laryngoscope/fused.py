@@ -14,8 +14,11 @@ of the numba kernel bit for bit. ``tests/test_laryngoscope_fused.py`` holds it t
 for bit in Triton's interpreter (``TRITON_INTERPRET=1``, on CPU tensors) and to the eager tensor engine
 on a GPU.
 
-Triton reads a Python float argument or literal as float32, so every constant that float32 does not hold
-exactly comes in as a float64 tensor (:func:`constants`), read by index.
+The scene's constants (:func:`constants`) are compiled in as float64 literals, which take no registers:
+loaded from a tensor, all 77 were hoisted out of the substep loop into registers, and the kernel spilled
+more to local memory; as arguments Triton would read them as float32. So the kernel is compiled once for
+each set of constants (a scene's and its device's parameters). ``scripts/fused_kernel_profile.py`` shows
+what it compiles to on a GPU (registers, spills, each loop's instructions), found without one.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from .space import SOLVER_ITERATIONS
 from .tensors import LaryngoscopeTensors
 
 BLOCK = 128            # devices a program (one thread each)
+COMPILE_OPTIONS = {"enable_fp_fusion": False}     # no fused multiply-add: the host's roundings
 
 # where :func:`constants` puts each group: the tongue's (:class:`.physics.Constants` flattened) at 0, then
 # the coupling's, the contact's scalars, the springs' hand anchors, the segment's ends and normal, the
@@ -48,8 +52,8 @@ _SEG_NORMAL: tl.constexpr = tl.constexpr(55)
 _LOCAL: tl.constexpr = tl.constexpr(57)
 
 
-def constants(dev: LaryngoscopeTensors) -> torch.Tensor:
-    """The kernel's float64 constants (the layout :func:`_control_period` reads), on the batch's device."""
+def constants(dev: LaryngoscopeTensors) -> tuple[float, ...]:
+    """The kernel's constants in the layout :func:`_control_period` reads (``C``)."""
     c, s, k = dev.c, dev._teeth.solver, dev._coupling
     tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]
     coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]
@@ -61,7 +65,23 @@ def constants(dev: LaryngoscopeTensors) -> torch.Tensor:
     groups = [np.array(tongue), np.array(coupling), np.array(solver), np.array(anchors), *geometry]
     starts = np.cumsum([0] + [len(g) for g in groups])
     assert [int(x) for x in starts[1:7]] == [x.value for x in (_COUPLING, _SOLVER, _ANCHORS, _ENDS, _SEG_NORMAL, _LOCAL)]
-    return torch.as_tensor(np.concatenate(groups), dtype=torch.float64, device=dev.torch_device)
+    return tuple(float(x) for x in np.concatenate(groups))
+
+
+@triton.jit
+def _k(C: tl.constexpr, i: tl.constexpr):
+    """Constant ``i`` of :func:`constants`' layout, a float64 literal in the compiled kernel."""
+    return tl.full((), C[i], tl.float64)
+
+
+@triton.jit
+def _pick(C: tl.constexpr, start: tl.constexpr, j, count: tl.constexpr):
+    """Constant ``start + 2 j`` (a point's coordinate) for ``j`` below ``count``: a constant, or one index a
+    device, then picked among the ``count`` literals."""
+    value = _k(C, start)
+    for m in tl.static_range(1, count):
+        value = tl.where(j == m, _k(C, start + 2 * m), value)
+    return value
 
 
 @triton.jit
@@ -90,107 +110,93 @@ def _lerp_t(ax, ay, bx, by, t):
 
 
 @triton.jit
-def _vertex(c, j, ca, sa, px, py):
+def _vertex(C: tl.constexpr, j, ca, sa, px, py, V: tl.constexpr):
     """The blade's vertex ``j`` (a constant or one index a device) in the world."""
-    lx, ly = tl.load(c + _LOCAL + 2 * j), tl.load(c + _LOCAL + 2 * j + 1)
+    lx, ly = _pick(C, _LOCAL, j, V), _pick(C, _LOCAL + 1, j, V)
     return (ca * lx + -sa * ly) + px, (sa * lx + ca * ly) + py
 
 
 @triton.jit
-def _normal(c, j, ca, sa, V: tl.constexpr):
+def _normal(C: tl.constexpr, j, ca, sa, V: tl.constexpr):
     """The plane normal of the blade's vertex ``j`` in the world."""
-    lx, ly = tl.load(c + _LOCAL + 2 * V + 2 * j), tl.load(c + _LOCAL + 2 * V + 2 * j + 1)
+    lx, ly = _pick(C, _LOCAL + 2 * V, j, V), _pick(C, _LOCAL + 2 * V + 1, j, V)
     return ca * lx + -sa * ly, sa * lx + ca * ly
 
 
 @triton.jit
-def _end(c, i):
+def _end(C: tl.constexpr, i):
     """End ``i`` (0 or 1) of the incisors' segment."""
-    return tl.load(c + _ENDS + 2 * i), tl.load(c + _ENDS + 1 + 2 * i)
+    return _pick(C, _ENDS, i, 2), _pick(C, _ENDS + 1, i, 2)
 
 
 @triton.jit
-def _point(c, i, j, ca, sa, px, py):
+def _point(C: tl.constexpr, i, j, ca, sa, px, py, V: tl.constexpr):
     """The difference's point (blade vertex ``j``) - (segment end ``i``)."""
-    vx, vy = _vertex(c, j, ca, sa, px, py)
-    ex, ey = _end(c, i)
+    vx, vy = _vertex(C, j, ca, sa, px, py, V)
+    ex, ey = _end(C, i)
     return vx - ex, vy - ey
 
 
 @triton.jit
-def _difference(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
-    """The difference's points (blade vertex ``j``) - (segment end ``i``) of every device, as ``(devices,
-    2 VP)`` columns ``i VP + j`` (``VP``: ``V`` rounded up to a power of two), and which columns hold one."""
-    cols = tl.arange(0, 2 * VP)
-    i, j = cols // VP, cols % VP
-    valid = j < V
-    lx = tl.load(c + _LOCAL + 2 * j, valid, 0.0)[None, :]
-    ly = tl.load(c + _LOCAL + 2 * j + 1, valid, 0.0)[None, :]
-    ex, ey = tl.load(c + _ENDS + 2 * i)[None, :], tl.load(c + _ENDS + 1 + 2 * i)[None, :]
-    ca, sa = ca[:, None], sa[:, None]
-    return ((ca * lx + -sa * ly) + px[:, None]) - ex, ((sa * lx + ca * ly) + py[:, None]) - ey, valid[None, :]
+def _candidate(k, V: tl.constexpr):
+    """:func:`.kernel._candidate`: (segment end, blade vertex) at the start and the end of candidate edge
+    ``k`` of the difference (a constant, or one index a device)."""
+    edge = k < 2 * V
+    return (tl.where(edge, k // V, 0), tl.where(edge, k % V, k - 2 * V),
+            tl.where(edge, k // V, 1), tl.where(edge, (k % V + 1) % V, k - 2 * V))
 
 
 @triton.jit
-def _hull_side(qx, qy, valid, ax, ay, bx, by):
-    """:func:`.kernel._hull_side`: 1, -1 or 0 for the edge ``a -> b`` of the difference (points ``q``)."""
-    ex, ey = (bx - ax)[:, None], (by - ay)[:, None]
-    side = ex * (qy - ay[:, None]) - ey * (qx - ax[:, None])
-    left = tl.max((valid & ~(side >= 0.0)).to(tl.int32), axis=1) == 0
-    right = tl.max((valid & ~(side <= 0.0)).to(tl.int32), axis=1) == 0
+def _hull_side(C: tl.constexpr, ax, ay, bx, by, ca, sa, px, py, V: tl.constexpr):
+    """:func:`.kernel._hull_side`: 1 (every point of the difference on the left of ``a -> b``), -1 (right)
+    or 0 (points on both sides: not a hull edge)."""
+    ex, ey = bx - ax, by - ay
+    left = tl.full(px.shape, 1, tl.int1)
+    right = left
+    for i in tl.static_range(2):
+        for j in tl.static_range(V):
+            qx, qy = _point(C, i, j, ca, sa, px, py, V)
+            side = ex * (qy - ay) - ey * (qx - ax)
+            left, right = left & (side >= 0.0), right & (side <= 0.0)
     return tl.where(left, 1, tl.where(right, -1, 0))
 
 
 @triton.jit
-def _candidate_side(c, k: tl.constexpr, ca, sa, px, py, qx, qy, valid, V: tl.constexpr):
-    """Candidate edge ``k`` of the difference (:func:`.kernel._candidate`): its two ends and hull side."""
-    if k < 2 * V:
-        ax, ay = _point(c, k // V, k % V, ca, sa, px, py)
-        bx, by = _point(c, k // V, (k % V + 1) % V, ca, sa, px, py)
-    else:
-        ax, ay = _point(c, 0, k - 2 * V, ca, sa, px, py)
-        bx, by = _point(c, 1, k - 2 * V, ca, sa, px, py)
-    return ax, ay, bx, by, _hull_side(qx, qy, valid, ax, ay, bx, by)
-
-
-@triton.jit
-def _collide(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
+def _collide(C: tl.constexpr, ca, sa, px, py, V: tl.constexpr):
     """:func:`.kernel._collide` for every device of the program: the normal, which contacts exist, their
     points (on the segment, on the blade) and features."""
-    radius, tiny = tl.load(c + _SOLVER), tl.load(c + _SOLVER + 5)
-    dqx, dqy, valid = _difference(c, ca, sa, px, py, V, VP)
-    inside = tl.full(px.shape, 1, tl.int1)
-    for k in tl.static_range(3 * V):                    # kernel._cores_overlap
-        ax, ay, bx, by, left = _candidate_side(c, k, ca, sa, px, py, dqx, dqy, valid, V)
-        origin = (bx - ax) * -ay - (by - ay) * -ax
-        inside = inside & ~(((left == 1) & ~(origin > 0.0)) | ((left == -1) & ~(origin < 0.0)))
+    radius, tiny, far = _k(C, _SOLVER), _k(C, _SOLVER + 5), _k(C, _SOLVER + 8)
     zero = tl.zeros(px.shape, tl.float64)
-    best_d, best_px, best_py, e_dx, e_dy = zero + tl.load(c + _SOLVER + 8), zero, zero, zero, zero
-    best_left = tl.zeros(px.shape, tl.int32)
-    best_ia, best_ja, best_ib, best_jb = best_left, best_left, best_left, best_left
+    none = tl.zeros(px.shape, tl.int32)
+    # One pass over the candidates finds whether the origin is inside the hull (kernel._cores_overlap)
+    # and the nearest candidate for either answer, so each hull side is computed once: inside, the
+    # nearest hull edge and its side; outside, the nearest of all and its direction. A search that
+    # finds none keeps its distance at infinity (d < far is false for inf and nan).
+    inside = tl.full(px.shape, 1, tl.int1)
+    in_d, in_left, in_k = zero + far, none, none
+    out_d, out_px, out_py, out_dx, out_dy, out_k = zero + far, zero, zero, zero, zero, none
     for k in tl.static_range(3 * V):
-        ax, ay, bx, by, side = _candidate_side(c, k, ca, sa, px, py, dqx, dqy, valid, V)
-        left = tl.where(inside, side, 0)
+        ia, ja, ib, jb = _candidate(k, V)
+        ax, ay = _point(C, ia, ja, ca, sa, px, py, V)
+        bx, by = _point(C, ib, jb, ca, sa, px, py, V)
+        side = _hull_side(C, ax, ay, bx, by, ca, sa, px, py, V)
+        origin = (bx - ax) * -ay - (by - ay) * -ax
+        inside = inside & ~(((side == 1) & ~(origin > 0.0)) | ((side == -1) & ~(origin < 0.0)))
         t = _closest_t(ax, ay, bx, by)
         qx, qy = _lerp_t(ax, ay, bx, by, t)
         d = qx * qx + qy * qy
-        better = ~(inside & (left == 0)) & (d < best_d)   # inside the hull only hull edges; the first of equals
-        best_d, best_px, best_py = tl.where(better, d, best_d), tl.where(better, qx, best_px), tl.where(better, qy, best_py)
-        best_left = tl.where(better, left, best_left)
-        e_dx, e_dy = tl.where(better, bx - ax, e_dx), tl.where(better, by - ay, e_dy)
-        if k < 2 * V:
-            best_ia = tl.where(better, k // V, best_ia)
-            best_ja = tl.where(better, k % V, best_ja)
-            best_ib = tl.where(better, k // V, best_ib)
-            best_jb = tl.where(better, (k % V + 1) % V, best_jb)
-        else:
-            best_ia = tl.where(better, 0, best_ia)
-            best_ja = tl.where(better, k - 2 * V, best_ja)
-            best_ib = tl.where(better, 1, best_ib)
-            best_jb = tl.where(better, k - 2 * V, best_jb)
-    flip = tl.where(inside, best_left == 1, e_dy * best_px + -e_dx * best_py < 0.0)
-    m0x, m0y = _point(c, tl.where(flip, best_ib, best_ia), tl.where(flip, best_jb, best_ja), ca, sa, px, py)
-    m1x, m1y = _point(c, tl.where(flip, best_ia, best_ib), tl.where(flip, best_ja, best_jb), ca, sa, px, py)
+        better = (side != 0) & (d < in_d)                # inside the hull only hull edges; the first of equals
+        in_d, in_left, in_k = tl.where(better, d, in_d), tl.where(better, side, in_left), tl.where(better, k, in_k)
+        better = d < out_d
+        out_d, out_px, out_py = tl.where(better, d, out_d), tl.where(better, qx, out_px), tl.where(better, qy, out_py)
+        out_dx, out_dy = tl.where(better, bx - ax, out_dx), tl.where(better, by - ay, out_dy)
+        out_k = tl.where(better, k, out_k)
+    flip = tl.where(inside, in_left == 1, out_dy * out_px + -out_dx * out_py < 0.0)
+    found = tl.where(inside, in_d, out_d) < far           # else the kernel's first guess, all indices 0
+    ia, ja, ib, jb = _candidate(tl.where(inside, in_k, out_k), V)
+    ia, ja, ib, jb = tl.where(found, ia, 0), tl.where(found, ja, 0), tl.where(found, ib, 0), tl.where(found, jb, 0)
+    m0x, m0y = _point(C, tl.where(flip, ib, ia), tl.where(flip, jb, ja), ca, sa, px, py, V)
+    m1x, m1y = _point(C, tl.where(flip, ia, ib), tl.where(flip, ja, jb), ca, sa, px, py, V)
     # ClosestPointsNew
     t = _closest_t(m0x, m0y, m1x, m1y)
     qx, qy = _lerp_t(m0x, m0y, m1x, m1y, t)
@@ -203,26 +209,26 @@ def _collide(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
     inv = 1.0 / (d2 + tiny)
     nx, ny, d = tl.where(pair, qx * inv, nx), tl.where(pair, qy * inv, ny), tl.where(pair, d2, d)
     # SupportEdgeForSegment(seg, n) and SupportEdgeForPoly(poly, -n)
-    forward = tl.load(c + _SEG_NORMAL) * nx + tl.load(c + _SEG_NORMAL + 1) * ny > 0.0
+    forward = _k(C, _SEG_NORMAL) * nx + _k(C, _SEG_NORMAL + 1) * ny > 0.0
     s_a, s_b = tl.where(forward, 0, 1), tl.where(forward, 1, 0)
     bx, by = -nx, -ny
-    vx, vy = _vertex(c, 0, ca, sa, px, py)
-    i1p, top = best_left * 0, vx * bx + vy * by
+    vx, vy = _vertex(C, 0, ca, sa, px, py, V)
+    i1p, top = none, vx * bx + vy * by
     for j in tl.static_range(1, V):
-        vx, vy = _vertex(c, j, ca, sa, px, py)
+        vx, vy = _vertex(C, j, ca, sa, px, py, V)
         v = vx * bx + vy * by
         i1p, top = tl.where(v > top, j, i1p), tl.where(v > top, v, top)    # the first of equals
     i0p, i2p = (i1p - 1 + V) % V, (i1p + 1) % V
-    n1x, n1y = _normal(c, i1p, ca, sa, V)
-    n2x, n2y = _normal(c, i2p, ca, sa, V)
+    n1x, n1y = _normal(C, i1p, ca, sa, V)
+    n2x, n2y = _normal(C, i2p, ca, sa, V)
     keep = bx * n1x + by * n1y > bx * n2x + by * n2y
     q_a, q_b = tl.where(keep, i0p, i1p), tl.where(keep, i1p, i2p)
     # ContactPoints (the blade has no radius)
     touching = ((d - radius) - 0.0 <= 0.0) & (d <= radius + 0.0)
-    sax, say = _end(c, s_a)
-    sbx, sby = _end(c, s_b)
-    qax, qay = _vertex(c, q_a, ca, sa, px, py)
-    qbx, qby = _vertex(c, q_b, ca, sa, px, py)
+    sax, say = _end(C, s_a)
+    sbx, sby = _end(C, s_b)
+    qax, qay = _vertex(C, q_a, ca, sa, px, py, V)
+    qbx, qby = _vertex(C, q_b, ca, sa, px, py, V)
     d1a, d1b = sax * ny - say * nx, sbx * ny - sby * nx
     d2a, d2b = qax * ny - qay * nx, qbx * ny - qby * nx
     e1_denom = 1.0 / (d1b - d1a + tiny)
@@ -242,14 +248,14 @@ def _collide(c, ca, sa, px, py, V: tl.constexpr, VP: tl.constexpr):
 
 
 @triton.jit
-def _tongue(c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+def _tongue(C: tl.constexpr, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
             lat_y, lat_v, hand_lat, anchor, hl):
     """:func:`.physics.tongue_substep_floats` for every device of the program."""
-    R, h, inv_m, inv_I, h_over_m = tl.load(c + 0), tl.load(c + 1), tl.load(c + 2), tl.load(c + 3), tl.load(c + 4)
-    k, cc, k_t, mu, k_ref = tl.load(c + 5), tl.load(c + 6), tl.load(c + 7), tl.load(c + 8), tl.load(c + 9)
-    damping, step, inv_step = tl.load(c + 10), tl.load(c + 11), tl.load(c + 12)
-    k_rot, c_rot, qa, qb = tl.load(c + 14), tl.load(c + 15), tl.load(c + 16), tl.load(c + 17)
-    hx, hy, tx, ty = tl.load(c + 18), tl.load(c + 19), tl.load(c + 20), tl.load(c + 21)
+    R, h, inv_m, inv_I, h_over_m = _k(C, 0), _k(C, 1), _k(C, 2), _k(C, 3), _k(C, 4)
+    k, cc, k_t, mu, k_ref = _k(C, 5), _k(C, 6), _k(C, 7), _k(C, 8), _k(C, 9)
+    damping, step, inv_step = _k(C, 10), _k(C, 11), _k(C, 12)
+    k_rot, c_rot, qa, qb = _k(C, 14), _k(C, 15), _k(C, 16), _k(C, 17)
+    hx, hy, tx, ty = _k(C, 18), _k(C, 19), _k(C, 20), _k(C, 21)
     ex = px + ca * hx - sa * hy
     ey = py + sa * hx + ca * hy
     dx = (px + ca * tx - sa * ty) - ex
@@ -258,7 +264,7 @@ def _tongue(c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, 
     t = tl.where(t < 0.0, 0.0, tl.where(t > 1.0, 1.0, t))
     cx = ex + t * dx
     cy = ey + t * dy
-    dist = tl.sqrt(cx * cx + cy * cy) + tl.load(c + _SOLVER + 6)
+    dist = tl.sqrt(cx * cx + cy * cy) + _k(C, _SOLVER + 6)
     touching = dist < R
     depth = R - dist
     nx = cx / dist
@@ -300,10 +306,10 @@ def _tongue(c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, 
 
 
 @triton.jit
-def _prestep(c, anx, any_, px, py, vx, vy, w, p1x, p1y, p2x, p2y):
+def _prestep(C: tl.constexpr, anx, any_, px, py, vx, vy, w, p1x, p1y, p2x, p2y):
     """The pre-step of one contact (:func:`.incisors.prestep`): its lever, masses, bias and bounce."""
-    m_inv, i_inv, h = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + 1)
-    slop, bias_coef = tl.load(c + _SOLVER + 2), tl.load(c + _SOLVER + 3)
+    m_inv, i_inv, h = _k(C, _COUPLING), _k(C, _COUPLING + 1), _k(C, 1)
+    slop, bias_coef = _k(C, _SOLVER + 2), _k(C, _SOLVER + 3)
     r1x, r1y = p1x - 0.0, p1y - 0.0
     r2x, r2y = p2x - px, p2y - py
     rcn = r2x * any_ - r2y * anx
@@ -318,11 +324,11 @@ def _prestep(c, anx, any_, px, py, vx, vy, w, p1x, p1y, p2x, p2y):
 
 
 @triton.jit
-def _spring(c, s: tl.constexpr, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w):
+def _spring(C: tl.constexpr, s: tl.constexpr, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w):
     """Spring ``s``'s explicit impulse: the new velocities and what its implicit damping reads."""
-    m_inv, i_inv, h = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + 1)
-    k_lin, c_lin = tl.load(c + _COUPLING + 4), tl.load(c + _COUPLING + 5)
-    ax, ay = tl.load(c + _ANCHORS + 2 * s), tl.load(c + _ANCHORS + 1 + 2 * s)
+    m_inv, i_inv, h = _k(C, _COUPLING), _k(C, _COUPLING + 1), _k(C, 1)
+    k_lin, c_lin = _k(C, _COUPLING + 4), _k(C, _COUPLING + 5)
+    ax, ay = _k(C, _ANCHORS + 2 * s), _k(C, _ANCHORS + 1 + 2 * s)
     r1x, r1y = cp * ax + -sp * ay, sp * ax + cp * ay
     dx, dy = (px + gqx) - (gx + r1x), (py + gqy) - (gy + r1y)
     dist = tl.sqrt(dx * dx + dy * dy)
@@ -330,17 +336,17 @@ def _spring(c, s: tl.constexpr, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w):
     nx, ny = dx * inv, dy * inv
     rcn = gqx * ny - gqy * nx
     kk = m_inv + i_inv * rcn * rcn
-    j = (tl.load(c + _SOLVER + 7) - dist) * k_lin * h
+    j = (_k(C, _SOLVER + 7) - dist) * k_lin * h
     vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
     w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
     return vx, vy, w, r1x, r1y, nx, ny, 1.0 / kk, 1.0 - tl.exp(-c_lin * h * kk), j
 
 
 @triton.jit
-def _contact_impulse(c, on, rx, ry, n_mass, t_mass, bias, bounce, j_bias, jn, jt, anx, any_,
+def _contact_impulse(C: tl.constexpr, on, rx, ry, n_mass, t_mass, bias, bounce, j_bias, jn, jt, anx, any_,
                      vx, vy, w, bvx, bvy, bw):
     """One iteration of one contact's impulse (:func:`.incisors.apply_impulse`), where ``on``."""
-    m_inv, i_inv, friction = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1), tl.load(c + _SOLVER + 1)
+    m_inv, i_inv, friction = _k(C, _COUPLING), _k(C, _COUPLING + 1), _k(C, _SOLVER + 1)
     vbn = (bvx + -ry * bw) * anx + (bvy + rx * bw) * any_
     vr_x, vr_y = vx + -ry * w, vy + rx * w
     vrn = vr_x * anx + vr_y * any_
@@ -365,9 +371,9 @@ def _contact_impulse(c, on, rx, ry, n_mass, t_mass, bias, bounce, j_bias, jn, jt
 
 
 @triton.jit
-def _spring_damping(c, r1x, r1y, nx, ny, n_mass, v_coef, target, acc, gqx, gqy, hvx, hvy, hw, vx, vy, w):
+def _spring_damping(C: tl.constexpr, r1x, r1y, nx, ny, n_mass, v_coef, target, acc, gqx, gqy, hvx, hvy, hw, vx, vy, w):
     """One iteration of one spring's implicit damping."""
-    m_inv, i_inv = tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1)
+    m_inv, i_inv = _k(C, _COUPLING), _k(C, _COUPLING + 1)
     rel_x = (vx + -gqy * w) - (hvx + -r1y * hw)
     rel_y = (vy + gqx * w) - (hvy + r1x * hw)
     vrn = rel_x * nx + rel_y * ny
@@ -381,8 +387,8 @@ def _spring_damping(c, r1x, r1y, nx, ny, n_mass, v_coef, target, acc, gqx, gqy, 
 
 
 @triton.jit
-def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, count, c, loads, slopes, top,
-                    iterations, persistence, V: tl.constexpr, VP: tl.constexpr, BLOCK_SIZE: tl.constexpr):
+def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, count, loads, slopes, top,
+                    iterations, persistence, C: tl.constexpr, V: tl.constexpr, BLOCK_SIZE: tl.constexpr):
     """``count`` substeps of every device (the rows of the state tensors, updated in place) with the hands
     commanded at ``command`` ``(4, n)``: :func:`.kernel.control_period`, one thread a device."""
     rows = tl.program_id(0) * BLOCK_SIZE + tl.arange(0, BLOCK_SIZE)
@@ -394,32 +400,29 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
     hand_lat, anchor = tl.load(lateral + 4 * rows + 2, live), tl.load(lateral + 4 * rows + 3, live)
     vX, vY = tl.load(command + rows, live), tl.load(command + n + rows, live)
     spin, v_lat = tl.load(command + 2 * n + rows, live), tl.load(command + 3 * n + rows, live)
-    h, m_inv, i_inv = tl.load(c + 1), tl.load(c + _COUPLING), tl.load(c + _COUPLING + 1)
-    qx, qy = tl.load(c + _COUPLING + 2), tl.load(c + _COUPLING + 3)
-    k_rot, c_rot, dt_coef = tl.load(c + _COUPLING + 6), tl.load(c + _COUPLING + 7), tl.load(c + _SOLVER + 4)
+    h, m_inv, i_inv = _k(C, 1), _k(C, _COUPLING), _k(C, _COUPLING + 1)
+    qx, qy = _k(C, _COUPLING + 2), _k(C, _COUPLING + 3)
+    k_rot, c_rot, dt_coef = _k(C, _COUPLING + 6), _k(C, _COUPLING + 7), _k(C, _SOLVER + 4)
     i_sum = 1.0 / i_inv
     w_coef = 1.0 - tl.exp(-c_rot * h * i_inv)
     zero = tl.zeros([BLOCK_SIZE], tl.float64)
     no = tl.zeros([BLOCK_SIZE], tl.int1)
     none = tl.zeros([BLOCK_SIZE], tl.int32)
     # the arbiter with the incisors: it starts empty at every period (no contact state crosses one)
-    alive, ticks, anx, any_ = no, none, zero, zero
+    alive, ticks = no, none
     ex0, ex1, f00, f01, f10, f11 = no, no, none, none, none, none
     jn0, jn1, jt0, jt1 = zero, zero, zero, zero
-    r2x0, r2y0, r2x1, r2y1 = zero, zero, zero, zero
-    n_mass0, t_mass0, bias0, bounce0 = zero, zero, zero, zero
-    n_mass1, t_mass1, bias1, bounce1 = zero, zero, zero, zero
     bvx, bvy, bw, impulse = zero, zero, zero, zero
     hvx, hvy, hw, hl, P, Q, cx, cy = zero, zero, zero, zero, zero, zero, zero, zero
     ca, sa = tl.cos(a), tl.sin(a)
     for _ in range(count):
-        hvx = _clip(vX, (tl.load(c + 22) - gx) / h, (tl.load(c + 26) - gx) / h)
-        hvy = _clip(vY, (tl.load(c + 23) - gy) / h, (tl.load(c + 27) - gy) / h)
-        hw = _clip(spin, (tl.load(c + 24) - pitch) / h, (tl.load(c + 28) - pitch) / h)
-        hl = _clip(v_lat, (tl.load(c + 25) - hand_lat) / h, (tl.load(c + 29) - hand_lat) / h)
+        hvx = _clip(vX, (_k(C, 22) - gx) / h, (_k(C, 26) - gx) / h)
+        hvy = _clip(vY, (_k(C, 23) - gy) / h, (_k(C, 27) - gy) / h)
+        hw = _clip(spin, (_k(C, 24) - pitch) / h, (_k(C, 28) - pitch) / h)
+        hl = _clip(v_lat, (_k(C, 25) - hand_lat) / h, (_k(C, 29) - hand_lat) / h)
         hand_lat = hand_lat + h * hl
         fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
-            c, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+            C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
             lat_y, lat_v, hand_lat, anchor, hl)
         # rigid.coupling_step: 1. positions, spending the contact's bias velocities
         gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
@@ -428,7 +431,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         ca, sa, cp, sp = tl.cos(a), tl.sin(a), tl.cos(pitch), tl.sin(pitch)
         # incisors.prestep: collide, update the arbiter, pre-step its contacts
         (nnx, nny, new0, new1, p1x0, p1y0, p2x0, p2y0, p1x1, p1y1, p2x1, p2y1,
-         g00, g01, g10, g11) = _collide(c, ca, sa, px, py, V, VP)
+         g00, g01, g10, g11) = _collide(C, ca, sa, px, py, V)
         touching = new0 | new1
         # a new contact keeps the impulses of an old one with its features (the later old one wins)
         same00 = alive & ex0 & (g00 == f00) & (g01 == f01)
@@ -448,24 +451,20 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         f10, f11 = tl.where(touching, g10, f10), tl.where(touching, g11, f11)
         jn0, jt0 = tl.where(touching, jn_new0, jn0), tl.where(touching, jt_new0, jt0)
         jn1, jt1 = tl.where(touching, jn_new1, jn1), tl.where(touching, jt_new1, jt1)
-        anx, any_ = tl.where(touching, nnx, anx), tl.where(touching, nny, any_)
-        r2x, r2y, n_mass, t_mass, bias, bounce = _prestep(c, anx, any_, px, py, vx, vy, w,
-                                                          p1x0, p1y0, p2x0, p2y0)
-        r2x0, r2y0 = tl.where(touching, r2x, r2x0), tl.where(touching, r2y, r2y0)
-        n_mass0, t_mass0 = tl.where(touching, n_mass, n_mass0), tl.where(touching, t_mass, t_mass0)
-        bias0, bounce0 = tl.where(touching, bias, bias0), tl.where(touching, bounce, bounce0)
-        r2x, r2y, n_mass, t_mass, bias, bounce = _prestep(c, anx, any_, px, py, vx, vy, w,
-                                                          p1x1, p1y1, p2x1, p2y1)
-        r2x1, r2y1 = tl.where(touching, r2x, r2x1), tl.where(touching, r2y, r2y1)
-        n_mass1, t_mass1 = tl.where(touching, n_mass, n_mass1), tl.where(touching, t_mass, t_mass1)
-        bias1, bounce1 = tl.where(touching, bias, bias1), tl.where(touching, bounce, bounce1)
+        # the normal and the pre-step are read only where touching, so they are not carried from the
+        # substep before (the numba kernel keeps them; a device not touching never reads them)
+        anx, any_ = nnx, nny
+        r2x0, r2y0, n_mass0, t_mass0, bias0, bounce0 = _prestep(C, anx, any_, px, py, vx, vy, w,
+                                                                p1x0, p1y0, p2x0, p2y0)
+        r2x1, r2y1, n_mass1, t_mass1, bias1, bounce1 = _prestep(C, anx, any_, px, py, vx, vy, w,
+                                                                p1x1, p1y1, p2x1, p2y1)
         j_bias0, j_bias1 = zero, zero
         # 2. the springs' explicit impulses
         gqx, gqy = ca * qx + -sa * qy, sa * qx + ca * qy
         vx, vy, w, s_r1x0, s_r1y0, s_nx0, s_ny0, s_mass0, s_coef0, s_acc0 = _spring(
-            c, 0, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
+            C, 0, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
         vx, vy, w, s_r1x1, s_r1y1, s_nx1, s_ny1, s_mass1, s_coef1, s_acc1 = _spring(
-            c, 1, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
+            C, 1, cp, sp, gqx, gqy, px, py, gx, gy, vx, vy, w)
         s_target0, s_target1 = zero, zero
         j_rot = ((pitch - a) - 0.0) * k_rot * h
         w = w + j_rot * i_inv
@@ -485,14 +484,14 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         # 4. the implicit impulses: the contact's, then the springs' in the order added
         for _pass in range(iterations):
             vx, vy, w, bvx, bvy, bw, j_bias0, jn0, jt0 = _contact_impulse(
-                c, touching & ex0, r2x0, r2y0, n_mass0, t_mass0, bias0, bounce0, j_bias0, jn0, jt0, anx, any_,
+                C, touching & ex0, r2x0, r2y0, n_mass0, t_mass0, bias0, bounce0, j_bias0, jn0, jt0, anx, any_,
                 vx, vy, w, bvx, bvy, bw)
             vx, vy, w, bvx, bvy, bw, j_bias1, jn1, jt1 = _contact_impulse(
-                c, touching & ex1, r2x1, r2y1, n_mass1, t_mass1, bias1, bounce1, j_bias1, jn1, jt1, anx, any_,
+                C, touching & ex1, r2x1, r2y1, n_mass1, t_mass1, bias1, bounce1, j_bias1, jn1, jt1, anx, any_,
                 vx, vy, w, bvx, bvy, bw)
-            vx, vy, w, s_target0, s_acc0 = _spring_damping(c, s_r1x0, s_r1y0, s_nx0, s_ny0, s_mass0, s_coef0,
+            vx, vy, w, s_target0, s_acc0 = _spring_damping(C, s_r1x0, s_r1y0, s_nx0, s_ny0, s_mass0, s_coef0,
                                                            s_target0, s_acc0, gqx, gqy, hvx, hvy, hw, vx, vy, w)
-            vx, vy, w, s_target1, s_acc1 = _spring_damping(c, s_r1x1, s_r1y1, s_nx1, s_ny1, s_mass1, s_coef1,
+            vx, vy, w, s_target1, s_acc1 = _spring_damping(C, s_r1x1, s_r1y1, s_nx1, s_ny1, s_mass1, s_coef1,
                                                            s_target1, s_acc1, gqx, gqy, hvx, hvy, hw, vx, vy, w)
             wrn = hw - w
             w_damp = (target_wrn - wrn) * w_coef
@@ -533,7 +532,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
 class LaryngoscopeFused(LaryngoscopeTensors):
     """:class:`~.tensors.LaryngoscopeTensors` with each control period run by one Triton kernel
     (:func:`_control_period`), the state updated in place: the same state and readings, one launch a
-    step. Triton compiles the kernel at its first launch in a process (cached on disk by Triton)."""
+    step. Triton compiles the kernel at its first launch for a scene's constants (cached on disk by Triton)."""
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:
@@ -549,13 +548,16 @@ class LaryngoscopeFused(LaryngoscopeTensors):
                          "cuda_graph=True, or pass device={'batch_engine': 'numpy'} to compile the tensor engine's "
                          "substep")
 
+    def kernel_arguments(self, command: torch.Tensor, count: int) -> dict[str, Any]:
+        """What :func:`_control_period` is launched with for ``count`` substeps at ``command`` ``(4, n)``
+        (``scripts/fused_kernel_profile.py`` compiles it with the same, for a GPU it does not have)."""
+        return dict(blade=self._blade, hand=self._hand, lateral=self._lateral, hand_v=self._hand_v,
+                    contact=self._contact, incisor=self._incisor, command=command, n=self.n, count=count,
+                    loads=self._loads, slopes=self._slopes, top=self._top, iterations=SOLVER_ITERATIONS,
+                    persistence=PERSISTENCE, C=self._constants, V=self._vertices, BLOCK_SIZE=BLOCK)
+
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
         command = torch.stack(torch.broadcast_tensors(vX, vY, spin, v_lat)).to(torch.float64).contiguous()
-        grid = (triton.cdiv(self.n, BLOCK),)
-        _control_period[grid](self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor,
-                              command, self.n, count, self._constants, self._loads, self._slopes, self._top,
-                              SOLVER_ITERATIONS, PERSISTENCE, V=self._vertices,
-                              VP=triton.next_power_of_2(self._vertices), BLOCK_SIZE=BLOCK,
-                              enable_fp_fusion=False)
+        _control_period[(triton.cdiv(self.n, BLOCK),)](**self.kernel_arguments(command, count), **COMPILE_OPTIONS)
         self._touched.fill_(False)                  # the kernel starts every device's contact afresh
         self._forget()
