@@ -38,8 +38,9 @@ TOOLS = Path(triton.__file__).parent / "backends" / "nvidia" / "bin"
 FP64 = ("DADD", "DMUL", "DFMA")
 
 
-def compile_kernel(scene: str, capability: int) -> Any:
-    """The fused kernel of ``scene``'s laryngoscope compiled by Triton for ``sm_<capability>``."""
+def compile_kernel(scene: str, capability: int) -> tuple[Any, dict[str, Any]]:
+    """The fused kernel of ``scene``'s laryngoscope compiled by Triton for ``sm_<capability>``, and the
+    arguments of a control period it was compiled for."""
     world = World(scene_config(HAPTIC_SCENES[scene], {}))
     device = fused.LaryngoscopeFused(*laryngoscope_parts(world.scene, world.config), fused.BLOCK)
     command = torch.zeros((4, device.n), dtype=torch.float64)
@@ -49,7 +50,7 @@ def compile_kernel(scene: str, capability: int) -> Any:
                  for name, value in arguments.items()}
     source = ASTSource(fn=fused._control_period, signature=signature,
                        constexprs={name: arguments[name] for name in constexprs})
-    return triton.compile(source, target=GPUTarget("cuda", capability, 32), options=dict(fused.COMPILE_OPTIONS))
+    return triton.compile(source, target=GPUTarget("cuda", capability, 32), options=dict(fused.COMPILE_OPTIONS)), arguments
 
 
 def ptxas_report(ptx: str, capability: int, work: Path) -> dict[str, int]:
@@ -84,7 +85,11 @@ def loops(cubin: bytes, work: Path) -> list[dict[str, Any]]:
                           "local_loads": sum("LDL" in t for t in body),
                           "local_stores": sum("STL" in t for t in body),
                           "calls": sum("CALL" in t for t in body)})
-    found.append({"start": "kernel", "end": "", "instructions": len(code),
+    outer = max(found, key=lambda x: x["instructions"], default=None)
+    for x in found:
+        inside = outer is not None and int(outer["start"], 16) <= int(x["start"], 16) <= int(x["end"], 16) <= int(outer["end"], 16)
+        x["role"] = "substeps" if x is outer else "solver iterations" if inside else "other (a slow path's)"
+    found.append({"role": "whole kernel", "start": "", "end": "", "instructions": len(code),
                   "fp64": sum(any(op in t.split()[0] for op in FP64) for _, t in code if t.strip()),
                   "local_loads": sum("LDL" in t for _, t in code), "local_stores": sum("STL" in t for _, t in code),
                   "calls": sum("CALL" in t for _, t in code)})
@@ -98,7 +103,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("results"))
     args = parser.parse_args()
     start = time.time()
-    kernel = compile_kernel(args.scene, args.capability)
+    kernel, arguments = compile_kernel(args.scene, args.capability)
     seconds = time.time() - start
     work = args.out / f".fused_sm{args.capability}"
     work.mkdir(parents=True, exist_ok=True)
@@ -118,12 +123,15 @@ def main() -> None:
              f"ptxas: **{resources['registers']} registers** a thread, {resources['stack_bytes']} bytes of stack "
              f"({resources['spill_store_bytes']} bytes of spill stores and {resources['spill_load_bytes']} of spill "
              f"loads in the code), {kernel.metadata.shared} bytes of shared memory.", "",
-             "Loops of the disassembly (static counts; a loop's body holds the loops inside it), and the whole kernel:", "",
-             "| loop | instructions | float64 add/mul/fma | local loads | local stores | calls |", "|---|---|---|---|---|---|"]
-    lines += [f"| {x['start']}{'-' + x['end'] if x['end'] else ''} | {x['instructions']} | {x['fp64']} | "
-              f"{x['local_loads']} | {x['local_stores']} | {x['calls']} |" for x in found]
-    lines += ["", "The outer loop is the control period's substeps, the inner the solver's iterations; local loads "
-              "and stores are register spills, calls the slow paths of float64 division and of sin and cos."]
+             "Loops of the disassembly (static counts: a loop's body holds the loops inside it), and the whole kernel:", "",
+             "| loop | addresses | instructions | float64 add/mul/fma | local loads | local stores | calls |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {x['role']} | {x['start']}-{x['end']} | {x['instructions']} | {x['fp64']} | "
+              f"{x['local_loads']} | {x['local_stores']} | {x['calls']} |".replace("| - |", "| |") for x in found]
+    lines += ["", "The substeps' loop holds the solver's; local loads and stores are register spills (and the "
+              "argument reduction of sin and cos), calls the slow paths of float64 division and of sin and cos. "
+              f"An env-step runs the substeps' loop {arguments['count']} times and the solver's "
+              f"{arguments['iterations']} times in each."]
     write_text(args.out / f"fused_kernel_sm{args.capability}.md", "\n".join(lines) + "\n")
     write_text(args.out / f"fused_kernel_sm{args.capability}.json",
                json.dumps({"command": command, "triton": triton.__version__, "scene": args.scene,
