@@ -2,6 +2,7 @@
 kernel) against the numpy array engine, bit for bit in Triton's interpreter on CPU (on a GPU, to the
 tensor engine's bound: tests/test_torch_laryngoscope.py); and the engine the torch twin picks."""
 
+import functools
 import importlib.util
 import json
 import os
@@ -129,8 +130,28 @@ def test_the_torch_twin_picks_the_engine_batch_engine_and_the_device_name():
 
 
 @pytest.mark.skipif(not (HAS_TRITON and torch.cuda.is_available()), reason="the fused engine runs on CUDA devices")
-def test_the_fused_engine_refuses_compile_options_by_name():
-    """One kernel leaves nothing to compile. (Its recorded step: tests/test_torch_laryngoscope.py.)"""
-    with pytest.raises(ValueError, match="the fused engine .* runs a control period as one Triton kernel"):
-        gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=4, vectorization_mode="vector_entry_point",
-                     backend="torch", torch_device="cuda", target_draw="device", compile_options={})
+@pytest.mark.parametrize("cuda_graph", [False, True], ids=["compiled", "compiled-and-recorded"])
+def test_compile_options_compile_the_env_around_the_fused_kernel(cuda_graph):
+    """The kernel is compiled already, so ``compile_options`` compiles the env's work around it (inductor's
+    code for the response lookup, the reward, the episodes' starts; tests/test_torch_laryngoscope.py has
+    the graphs) and the kernel runs as it is: through autoresets the step agrees with the eager env's to
+    rounding, recorded as CUDA graphs or not."""
+    torch._dynamo.reset()
+    kwargs = dict(num_envs=64, torch_device="cuda", target_draw="device", check_actions=False, max_episode_steps=6,
+                  autoreset_mode="same_step")
+    make = functools.partial(gym.make_vec, "softenv:SoftSphereHaptic-v0", vectorization_mode="vector_entry_point",
+                             backend="torch", **kwargs)
+    eager, compiled = make(), make(compile_options={}, cuda_graph=cuda_graph)
+    assert type(compiled.unwrapped._device.laryngoscopes).__name__ == "LaryngoscopeFused"
+    eager.reset(seed=3)
+    compiled.reset(seed=3)
+    generator = torch.Generator(device="cuda").manual_seed(0)
+    for _ in range(20):
+        a = torch.rand((64, 4), generator=generator, device="cuda", dtype=torch.float64) * 2 - 1
+        o1, r1, te1, tr1, i1 = eager.step(a)
+        o2, r2, te2, tr2, i2 = compiled.step(a)
+        torch.testing.assert_close(o2, o1, rtol=0, atol=1e-6)              # float32 observations
+        torch.testing.assert_close(r2, r1, rtol=0, atol=1e-9)
+        torch.testing.assert_close(i2["incisor_force_N"], i1["incisor_force_N"], rtol=0, atol=1e-9)
+        assert torch.equal(te1 | tr1, te2 | tr2)
+    torch._dynamo.reset()

@@ -188,17 +188,18 @@ def test_the_recorded_haptic_step_replays_the_eager_one_bit_for_bit(batch_engine
 
 @pytest.mark.slow
 def test_the_compiled_substep_steps_as_the_eager_one():
-    """compile_options on a laryngoscope id compiles the device's substep (one graph, static shapes), not the
-    whole step; over a rollout levering on the teeth, through autoresets, float64: the observations and
-    rewards within 1e-9 of the eager twin's (inductor fuses and may reorder, so not bit for bit; measured
-    2e-13 in the state). CPU only: on CUDA inductor's code is refused (the next two tests)."""
+    """compile_options on a laryngoscope id compiles the device's substep alone (one graph, static shapes,
+    not the step's 20 substeps unrolled) and the env's work around the device's calls; over a rollout
+    levering on the teeth, through autoresets, float64: the observations and rewards within 1e-9 of the
+    eager twin's (inductor fuses and may reorder, so not bit for bit; measured 2e-13 in the state). CPU
+    only: on CUDA inductor's code for the substep is refused (the next two tests)."""
     torch._dynamo.reset()
     kwargs = dict(num_envs=4, torch_device="cpu", target_draw="device", check_actions=False,
                   max_episode_steps=15, autoreset_mode="same_step")
     eager = _make("SoftSphereHaptic-v0", "torch", **kwargs)
     compiled = _make("SoftSphereHaptic-v0", "torch", compile_options={}, **kwargs)
     assert "_substep" in vars(compiled.unwrapped._device.laryngoscopes)       # the device's substep compiled...
-    assert compiled.unwrapped._tensor_work == compiled.unwrapped._step_tensors  # ...the env's not
+    assert compiled.unwrapped._tensor_work != compiled.unwrapped._step_tensors  # ...and the env's work
     eager.reset(seed=2)
     compiled.reset(seed=2)
     ends = 0
@@ -211,6 +212,44 @@ def test_the_compiled_substep_steps_as_the_eager_one():
         assert torch.equal(te1 | tr1, te2 | tr2)
         ends += int((te1 | tr1).sum())
     assert ends == 4 * 2
+    torch._dynamo.reset()
+
+
+def test_compile_options_compile_the_env_around_the_laryngoscope():
+    """The laryngoscope keeps its step apart (its substep compiled alone; on CUDA its kernel), so the env
+    compiles its own work around the device's calls: each is a graph break, run as it is. With a backend
+    that runs dynamo's graphs as traced, the step equals the eager env's bit for bit through autoresets;
+    the device's code is in one graph only, its substep's, and the env's graphs (the response lookup, the
+    reward, the episodes' starts) hold none of it; over 40 steps no more graphs are made than the first
+    episodes made (no recompiling at every step)."""
+    graphs = []
+
+    def recorder(gm, example_inputs):
+        graphs.append(gm)
+        return gm.forward
+
+    def sources(graph):
+        lines = "".join(node.meta.get("stack_trace") or "" for node in graph.graph.nodes)
+        return {name for name in ("envs/torch_twin.py", "devices/laryngoscope/") if name in lines}
+
+    torch._dynamo.reset()
+    kwargs = dict(num_envs=4, torch_device="cpu", target_draw="device", check_actions=False, max_episode_steps=6,
+                  autoreset_mode="same_step")
+    eager, compiled = _make("SoftSphereHaptic-v0", "torch", **kwargs), \
+        _make("SoftSphereHaptic-v0", "torch", compile_options={"backend": recorder}, **kwargs)
+    eager.reset(seed=2)
+    compiled.reset(seed=2)
+    made = []
+    for a in torch.as_tensor(np.random.default_rng(8).uniform(-1, 1, (40, 4, 4))):
+        o1, r1, te1, tr1, i1 = eager.step(a)
+        o2, r2, te2, tr2, i2 = compiled.step(a)
+        assert torch.equal(o1, o2) and torch.equal(r1, r2) and torch.equal(te1, te2) and torch.equal(tr1, tr2)
+        assert torch.equal(i1["incisor_force_N"], i2["incisor_force_N"])
+        made.append(len(graphs))
+    assert [sources(g) for g in graphs].count({"devices/laryngoscope/"}) == 1      # the substep
+    assert sum(sources(g) == {"envs/torch_twin.py"} for g in graphs) >= 2          # the env's work, compiled
+    assert all(len(sources(g)) == 1 for g in graphs), [sources(g) for g in graphs]
+    assert made[-1] == made[13] > 0                                               # none after two episodes
     torch._dynamo.reset()
 
 

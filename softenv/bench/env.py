@@ -354,8 +354,10 @@ HAPTIC_GPU_TARGET = 50e6         # issue 37: env-steps/s at the best batch size
 def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
     """The laryngoscope's torch twin (float32 env, float64 device physics, device draw, same-step autoreset,
     no action check) on ``device`` over batch sizes: the tensor engine eager, and on CUDA also the fused
-    Triton kernel, each also recorded as CUDA graphs (``cuda_graph=True``), after a check that the default
-    engine's steps never synchronise with the host. The best is held to the issue's target."""
+    Triton kernel, each also recorded as CUDA graphs (``cuda_graph=True``), and the fused kernel with the
+    env's work compiled around it (``compile_options``, at the largest size only: each compile takes most
+    of a minute), after a check that the default engine's steps never synchronise with the host. The best
+    is held to the issue's target."""
     import torch                                            # torch: the rl extra
 
     rows = []
@@ -364,20 +366,25 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
         rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     # on CPU the tensor engine's eager row alone (bench_torch times its compiled substep there: a compile takes
-    # minutes); on CUDA the fused kernel (the default) and the tensor engine, each eager and recorded
+    # minutes); on CUDA the fused kernel (the default) and the tensor engine, each eager and recorded, and the
+    # fused kernel with the env compiled (inductor's CUDA code for the tensor engine's substep is refused)
     from ..devices.laryngoscope.part_tensors import fused_available  # torch and pymunk: the rl extra
 
-    engines = [("tensor engine", "numpy")]
+    engines = [("tensor engine", "numpy", False)]
     if fused_available(torch.device(device)):
-        engines.insert(0, ("fused kernel", "compiled"))
+        engines[:0] = [("fused kernel", "compiled", False), ("fused kernel", "compiled", True)]
     best: tuple[float, str] = (0.0, "")
-    for (engine, batch_engine), graphed in itertools.product(engines, [False, True] if device == "cuda" else [False]):
-        how = f"{engine}, eager" + (", CUDA graph (cuda_graph=True)" if graphed else "")
-        for n in sizes:
+    for (engine, batch_engine, compiled), graphed in itertools.product(engines, [False, True] if device == "cuda"
+                                                                        else [False]):
+        how = (f"{engine}, " + ("the env's work compiled (compile_options={})" if compiled else "eager")
+               + (", CUDA graph (cuda_graph=True)" if graphed else ""))
+        for n in sizes[-1:] if compiled else sizes:
             label = f"{HAPTIC_ID}: torch twin on {name}, {how}, float32 env, float64 device, device draw, {n:,} envs"
             try:
-                rate = n / torch_step_timing(n, device, torch.float32, "device", None, calls, cuda_graph=graphed,
-                                             env_id=HAPTIC_ID, warmup=2, batch_engine=batch_engine).median
+                # compiled: warmed up past the first episode's end, where the graphs of episode starts compile
+                rate = n / torch_step_timing(n, device, torch.float32, "device", "default" if compiled else None, calls,
+                                             cuda_graph=graphed, env_id=HAPTIC_ID, warmup=None if compiled else 2,
+                                             batch_engine=batch_engine).median
             except Exception as exc:           # out of memory at the largest size: report it, go on
                 message = " ".join(str(exc).split())
                 rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],

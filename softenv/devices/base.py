@@ -180,8 +180,10 @@ class DeviceTensors(DeviceNames, Protocol):
         ...
 
     def compile(self, options: dict[str, Any]) -> bool:
-        """Compile this device's own step with ``torch.compile(**options)`` and return True; or return False,
-        and the env compiles its whole step, this device's work inlined (the twin's ``compile_options``)."""
+        """The twin's ``compile_options``: return True where this device keeps its step apart, compiled here
+        with ``torch.compile(**options)`` or a kernel of its own, and the env compiles its work around the
+        device's calls (each a graph break, run as it is); or return False, and the env compiles its whole
+        step, this device's work inlined (``fullgraph``)."""
         ...
 
 

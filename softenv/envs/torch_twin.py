@@ -14,8 +14,8 @@ What it expresses: the tabulated response (``response.model = "exact"``, analyti
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
 dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal device, and the
 laryngoscope on float64 tensors, which agrees with the numpy engines to rounding: on CUDA one Triton
-kernel a step by default, elsewhere the tensor engine, whose substep ``compile_options`` compiles, not
-with inductor on CUDA).
+kernel a step by default, elsewhere the tensor engine; ``compile_options`` compiles the env's work around
+the device's step, and the tensor engine's substep, not with inductor on CUDA).
 Not: regressor responses and vertex observations.
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
@@ -40,6 +40,7 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..devices.base import DeviceTensors
 from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
 from .batching import check_actions, episode_limit
@@ -65,11 +66,12 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         target_draw: ``"host"`` (the numpy twin's episodes) or ``"device"`` (no host sync; see above).
         compile_options: ``torch.compile`` arguments (``{"mode": "reduce-overhead"}`` for CUDA graphs):
             the env compiles its step's tensor work (``fullgraph``; two graphs) and keeps its step count
-            and the action check on the host; a device with a step of its own to compile (the
-            laryngoscope's tensor engine: its substep, run 20 times a step) compiles that alone and the env's
-            work stays eager (with inductor, on CPU only: ``tensors.check_compile``; the fused kernel, the
-            laryngoscope's default on CUDA, refuses it). Needs ``target_draw="device"``. With CUDA graphs a step's outputs live until the next
-            step: clone what you keep.
+            and the action check on the host. A device that keeps its step apart (the laryngoscope: its
+            tensor engine compiles its substep, run 20 times a step, alone, with inductor on CPU only:
+            ``tensors.check_compile``; its fused kernel on CUDA is compiled already) runs its calls as they
+            are, and the env compiles its work around them (graph breaks: ``run_apart``). Needs
+            ``target_draw="device"``. With CUDA graphs a step's outputs live until the next step: clone
+            what you keep.
         cuda_graph: record the step's tensor work (eager, or compiled by ``compile_options`` in a mode
             without CUDA graphs) as CUDA graphs the env replays itself (:mod:`softenv.envs.torch_graph`):
             a step's host work is then one copy of the actions and one graph launch, without dynamo's and
@@ -145,9 +147,12 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
         # the tensor work of a step, compiled when compile_options asks, recorded when cuda_graph asks
-        # a device with a compiled step of its own (the laryngoscope's substep) leaves the env's work eager
-        work = (self._step_tensors if compile_options is None or self._device.compile(compile_options)
-                else torch.compile(self._step_tensors, fullgraph=True, **compile_options))
+        work: Any = self._step_tensors
+        if compile_options is not None:
+            apart = self._device.compile(compile_options)     # the laryngoscope's substep, its kernel
+            if apart:
+                run_apart(self._device)
+            work = torch.compile(self._step_tensors, fullgraph=not apart, **compile_options)
         self._tensor_work = GraphedStep(work, self._prev) if cuda_graph else work
         if self.torch_device.type == "cuda":
             # Every tensor the step reads stays at one address (the state is written in place: torch_parts.keep),
@@ -336,6 +341,17 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if isinstance(obs, dict):
             return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
         return torch.where(mask[:, None], fresh, obs)
+
+
+DEVICE_CALLS = ("reset", "act", "observation", "report")     # what a step calls of its device
+
+
+def run_apart(device: DeviceTensors) -> None:
+    """Leave ``device``'s calls out of the env's compiled step: each is a graph break, run as it is
+    (``torch.compiler.disable``), and dynamo compiles the env's work before and after it. For a device
+    that keeps its step apart (:meth:`~softenv.devices.base.DeviceTensors.compile` returns True)."""
+    for name in DEVICE_CALLS:
+        setattr(device, name, torch.compiler.disable(getattr(device, name)))
 
 
 def usable_device(value: Any) -> torch.device:

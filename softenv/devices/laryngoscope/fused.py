@@ -543,10 +543,8 @@ class LaryngoscopeFused(LaryngoscopeTensors):
         self._vertices = int(self._teeth.solver.local.shape[0])
 
     def compile_substep(self, options: dict[str, Any]) -> None:
-        raise ValueError(f"compile_options={options!r}: the fused engine (device.batch_engine='compiled' on CUDA) runs "
-                         "a control period as one Triton kernel, with nothing left to compile; record the step with "
-                         "cuda_graph=True, or pass device={'batch_engine': 'numpy'} to compile the tensor engine's "
-                         "substep")
+        """Nothing: the kernel is compiled already, and Triton's code is not inductor's to redo (the env
+        compiles its own work around it with ``options``)."""
 
     def kernel_arguments(self, command: torch.Tensor, count: int) -> dict[str, Any]:
         """What :func:`_control_period` is launched with for ``count`` substeps at ``command`` ``(4, n)``

@@ -80,7 +80,8 @@ class LaryngoscopeTensorPart:
         return term
 
     def compile(self, options: dict[str, Any]) -> bool:
-        """Compile the device's own step (the engine's :meth:`~.tensors.LaryngoscopeTensors.compile_substep`);
-        the env's work stays eager."""
+        """Compile the engine's own step (:meth:`~.tensors.LaryngoscopeTensors.compile_substep`: the tensor
+        engine's substep; the fused kernel has nothing left to compile) and keep it apart: the env compiles
+        its work around the device's calls."""
         self.laryngoscopes.compile_substep(options)
         return True
