@@ -1,12 +1,13 @@
 """What the laryngoscope's fused kernel (softenv.devices.laryngoscope.fused) compiles to on a CUDA GPU,
 found without one; writes ``results/fused_kernel_sm<N>.md`` and ``.json``.
 
-Triton compiles the kernel ahead of time for the target (default ``sm_90``: H100 and H200) with the
-arguments :meth:`~softenv.devices.laryngoscope.fused.LaryngoscopeFused.kernel_arguments` launches it
-with; ptxas (shipped with Triton) reports the registers a thread uses and the bytes it spills to local
-memory, and the disassembly (cuobjdump, also shipped) shows each loop's instructions: the control
-period's substep loop and the solver's iterations inside it. A kernel that compiles here compiles on the
-GPU; its speed is the GPU bench's (``softenv bench --device cuda --only gpu-haptic``).
+Triton compiles the kernel for the target (default ``sm_90``: H100 and H200) as a first launch with the
+arguments of :meth:`~softenv.devices.laryngoscope.fused.LaryngoscopeFused.kernel_arguments` would,
+through a driver that only names the target (``warmup``: nothing is launched); ptxas (shipped with
+Triton) reports the registers a thread uses and the bytes it spills to local memory, and the disassembly
+(cuobjdump, also shipped) shows each loop's instructions: the control period's substep loop and the
+solver's iterations inside it. A kernel that compiles here compiles on the GPU; its speed is the GPU
+bench's (``softenv bench --device cuda --only gpu-haptic``).
 
     python scripts/fused_kernel_profile.py [--scene SoftSphereHaptic-v0] [--capability 90]
 """
@@ -24,7 +25,7 @@ from typing import Any
 import torch
 import triton
 from triton.backends.compiler import GPUTarget
-from triton.compiler import ASTSource
+from triton.runtime import driver
 
 from softenv._artifact import write_text
 from softenv.devices.laryngoscope import fused
@@ -37,19 +38,34 @@ TOOLS = Path(triton.__file__).parent / "backends" / "nvidia" / "bin"
 FP64 = ("DADD", "DMUL", "DFMA")
 
 
+class CompileOnlyDriver:
+    """Triton's driver as far as a compile asks it: the device, its stream and the target a launch on a GPU
+    of compute capability ``capability`` compiles for. Nothing is launched (``warmup``), so nothing more."""
+
+    def __init__(self, capability: int) -> None:
+        self.target = GPUTarget("cuda", capability, 32)
+
+    def get_current_device(self) -> int:
+        return 0
+
+    def get_current_stream(self, device: int | None = None) -> int:
+        return 0
+
+    def get_current_target(self) -> GPUTarget:
+        return self.target
+
+
 def compile_kernel(scene: str, capability: int) -> tuple[Any, dict[str, Any]]:
-    """The fused kernel of ``scene``'s laryngoscope compiled by Triton for ``sm_<capability>``, and the
-    arguments of a control period it was compiled for."""
+    """The fused kernel of ``scene``'s laryngoscope compiled by Triton for ``sm_<capability>`` through the
+    launch's own path (its arguments bound, specialised and compiled as a first launch does, then not
+    launched), and the arguments of the control period it was compiled for."""
+    driver.set_active(CompileOnlyDriver(capability))      # for this process, which launches nothing
     world = World(scene_config(HAPTIC_SCENES[scene], {}))
     device = fused.LaryngoscopeFused(*laryngoscope_parts(world.scene, world.config), fused.BLOCK)
     command = torch.zeros((4, device.n), dtype=torch.float64)
     arguments = device.kernel_arguments(command, device.n_substeps)
-    constexprs = {"C", "V", "BLOCK_SIZE"}
-    signature = {name: "constexpr" if name in constexprs else "*fp64" if isinstance(value, torch.Tensor) else "i32"
-                 for name, value in arguments.items()}
-    source = ASTSource(fn=fused._control_period, signature=signature,
-                       constexprs={name: arguments[name] for name in constexprs})
-    return triton.compile(source, target=GPUTarget("cuda", capability, 32), options=dict(fused.COMPILE_OPTIONS)), arguments
+    kernel = fused._control_period.warmup(**arguments, **fused.COMPILE_OPTIONS, grid=(1,))
+    return kernel, arguments
 
 
 def ptxas_report(ptx: str, capability: int, work: Path) -> dict[str, int]:

@@ -98,9 +98,9 @@ def test_the_fused_kernel_steps_as_the_numpy_engine_bit_for_bit_in_the_interpret
 @pytest.mark.slow
 @pytest.mark.skipif(not HAS_TRITON, reason="needs triton, which comes with torch's CUDA builds (or pip install triton)")
 def test_the_fused_kernel_compiles_for_hopper_without_a_gpu(tmp_path):
-    """Triton compiles the kernel ahead of time for sm_90 (H100, H200) with the arguments the engine
-    launches it with, and ptxas (shipped with Triton) assembles it: what Triton would refuse on the GPU
-    (a loop-carried value changing type, a constant it cannot type) fails here. One thread a device shares
+    """Triton compiles the kernel for sm_90 (H100, H200) through a first launch's own path (the engine's
+    arguments bound and specialised; nothing launched), and ptxas (shipped with Triton) assembles it: what
+    Triton would refuse on the GPU (a loop-carried value changing type, a constant it cannot type) fails here. One thread a device shares
     nothing with another, so the kernel uses no shared memory; its loops are the substeps and, inside them,
     the solver's iterations."""
     script = os.path.join(os.path.dirname(__file__), "..", "scripts", "fused_kernel_profile.py")
