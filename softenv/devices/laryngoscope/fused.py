@@ -8,7 +8,8 @@ memory, not arithmetic (3 million env-steps/s at best on an H200). Here each dev
 once and written once. A branch of :func:`.kernel.control_period` is a ``tl.where`` here (both sides are
 computed; the one the device takes is kept), and its skip of the collision for a blade far from the
 incisors (:func:`.kernel._separated`) is gone: the collision finds no contact there, so the result is the
-same. The expressions are :func:`.kernel.control_period`'s, in its order; the kernel is launched without
+same; and one pass over the collision's candidate edges serves both of :func:`.kernel._collide`'s (each
+hull side computed once). The expressions are :func:`.kernel.control_period`'s; the kernel is launched without
 fused multiply-add, so where the GPU's ``cos``, ``sin``, ``exp`` round as the host's the result is that
 of the numba kernel bit for bit. ``tests/test_laryngoscope_fused.py`` holds it to the numpy engine bit
 for bit in Triton's interpreter (``TRITON_INTERPRET=1``, on CPU tensors) and to the eager tensor engine
