@@ -59,11 +59,11 @@ INTERPRETED = textwrap.dedent("""
         ref.control_step(a)
         rollout.append((before, a, ref.state(), ref.incisor_force.copy(), ref.observation()))
         sunk.append(any(overlaps))
-    incisors = [k for k, r in enumerate(rollout) if (r[3] > 0).any()]
-    tongue = [k for k, r in enumerate(rollout) if (r[2].contact[:, 0] > 0).any() and k not in incisors]
+    levering = [k for k, r in enumerate(rollout) if (r[3] > 0).any()]
+    tongue = [k for k, r in enumerate(rollout) if (r[2].contact[:, 0] > 0).any() and k not in levering]
     sunk = [k for k, x in enumerate(sunk) if x]
-    assert incisors and tongue, (incisors, tongue)
-    for k in sorted({incisors[0], incisors[-1], tongue[0], *sunk[:1], len(rollout) - 1}):
+    assert levering and tongue, (levering, tongue)
+    for k in sorted({levering[0], levering[-1], tongue[0], *sunk[:1], len(rollout) - 1}):
         before, a, after, incisor, observation = rollout[k]
         fused.load_state(before)
         fused.control_step(torch.as_tensor(a))
@@ -72,7 +72,7 @@ INTERPRETED = textwrap.dedent("""
             assert np.array_equal(getattr(state, field), getattr(after, field)), (k, field)
         assert np.array_equal(fused.incisor_force.numpy(), incisor), k
         assert np.array_equal(fused.observation().numpy(), observation), k
-    print(json.dumps({"incisors": incisors[0], "tongue": tongue[0], "sunk": sunk[:1]}))
+    print(json.dumps({"levering": levering[0], "tongue": tongue[0], "sunk": sunk[:1]}))
 """)
 
 # the default scene, and softenv bench's light blade driven fast, which sinks it into the incisors until
