@@ -181,8 +181,8 @@ def test_bench_device_cuda_runs_the_gpu_sections_alone(tmp_path):
 
 
 def test_the_gpu_rows_run_on_cpu_tensors_too():
-    """The GPU section's code path (sizes, eager and compiled timings, targets) on CPU tensors, so a
-    first GPU run does not meet it untried."""
+    """The GPU section's code path (sizes, eager and compiled timings, targets, the device alone) on CPU
+    tensors, so a first GPU run does not meet it untried."""
     from softenv.bench.env import device_rows, haptic_tensor_rows
 
     rows = device_rows("cpu", "cpu", (1024, 64), 2)
@@ -193,8 +193,10 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     assert all(r.target == "" and r.ok is None for r in twins[2:])
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
     haptic = haptic_tensor_rows("cpu", "cpu", (64,), 2)
-    assert len(haptic) == 1 and "64 envs" in haptic[0].metric and haptic[0].value > 0      # no target off CUDA
-    assert haptic[0].section == "gpu-haptic" and "tensor engine, eager" in haptic[0].metric
+    assert [r.unit for r in haptic] == ["env-steps/s", "device-steps/s"]        # no target off CUDA
+    assert "tensor engine, eager" in haptic[0].metric and "64 envs" in haptic[0].metric
+    assert "tensor engine alone" in haptic[1].metric and "64 devices" in haptic[1].metric
+    assert all(r.section == "gpu-haptic" and r.value > 0 and r.ok is None for r in haptic), haptic
 
 
 def test_the_cuda_graph_timing_runs_on_cpu_tensors_and_leaves_inductor_as_it_was():

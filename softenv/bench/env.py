@@ -20,7 +20,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from ..envs import ENV_SCENES
+from ..envs import ENV_SCENES, HAPTIC_SCENES
+from ..envs.config import scene_config
+from ..envs.world import World
 from .timing import Row, Timing, gym_step_timing, measure, paired_step_ratios, spread_us
 
 
@@ -395,6 +397,46 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
     if device == "cuda" and best[0] > 0:
         rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: torch twin on {name}, best", best[0], "env-steps/s", best[1],
                         f">= {HAPTIC_GPU_TARGET / 1e6:.0f}M", best[0] >= HAPTIC_GPU_TARGET))
+    return rows + device_alone_rows(device, name, sizes[-1], calls)
+
+
+HAPTIC_REGISTER_CAPS = (None, 168, 128)     # the fused kernel's registers a thread: ptxas's 255, then capped
+
+
+def device_alone_rows(device: str, name: str, n: int, calls: int) -> list[Row]:
+    """The laryngoscope's torch engines alone, ``n`` devices stepped a control period at a time with
+    random commands and no env around them: beside the env's rows, what the env's own work costs. On
+    CUDA the fused kernel at ptxas's register count and capped (``maxnreg``: more warps an SM, more
+    spills: results/fused_kernel_sm90.md), and the tensor engine; elsewhere the tensor engine."""
+    import torch                                            # torch: the rl extra
+
+    from ..devices.laryngoscope.part import laryngoscope_parts  # pymunk: the rl extra
+    from ..devices.laryngoscope.part_tensors import fused_available, tensor_engine
+
+    world = World(scene_config(HAPTIC_SCENES[HAPTIC_ID], {}))
+    parts, torch_device = laryngoscope_parts(world.scene, world.config), torch.device(device)
+    generator = torch.Generator(device=device).manual_seed(0)
+    actions = [torch.rand((n, 4), generator=generator, device=device, dtype=torch.float64) * 2 - 1 for _ in range(4)]
+    variants: list[tuple[str, str, int | None]] = [("tensor engine", "numpy", None)]
+    if fused_available(torch_device):
+        variants[:0] = [("fused kernel", "compiled", cap) for cap in HAPTIC_REGISTER_CAPS]
+    rows = []
+    for engine_name, batch_engine, cap in variants:
+        label = (f"{HAPTIC_ID}: {engine_name} alone on {name}" + (f", maxnreg={cap}" if cap else "")
+                 + f", float64, {n:,} devices")
+        try:
+            engine = tensor_engine(batch_engine, torch_device)(*parts, n, torch_device)
+            if cap:
+                engine.launch_options = {**engine.launch_options, "maxnreg": cap}  # type: ignore[attr-defined]
+            for a in actions[:2]:                            # the kernel's compile, the first launch
+                engine.control_step(a)
+            rate = n / synchronized_timing(lambda i: engine.control_step(actions[i % len(actions)]), calls, device).median
+        except Exception as exc:           # out of memory, a register cap Triton refuses: report it, go on
+            message = " ".join(str(exc).split())
+            rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
+                            ok=False))
+            continue
+        rows.append(Row("gpu-haptic", label, rate, "device-steps/s"))
     return rows
 
 
@@ -451,12 +493,17 @@ def torch_step_timing(n: int, device: str, dtype: Any, draw: str, mode: str | No
         # past the first episode starts: every graph compiled (an eager step needs ``warmup`` steps only)
         for i in range(env.unwrapped.world.horizon + 2 if warmup is None else warmup):
             step(actions[i % len(actions)])
+    return synchronized_timing(lambda i: step(actions[i % len(actions)]), calls, device)
+
+
+def synchronized_timing(call: Any, calls: int, device: str) -> Timing:
+    """Seconds per ``call(i)``: 5 repeats of ``calls`` calls, ``device`` synchronised around each repeat."""
     samples = []
     for _ in range(5):
         _synchronize(device)
         t0 = time.perf_counter()
         for i in range(calls):
-            step(actions[i % len(actions)])
+            call(i)
         _synchronize(device)
         samples.append((time.perf_counter() - t0) / calls)
     return Timing(np.array(samples))

@@ -542,6 +542,8 @@ class LaryngoscopeFused(LaryngoscopeTensors):
         self._loads, self._slopes = (x.contiguous() for x in (self._loads, self._slopes))
         self._top = int(self.c.top)
         self._vertices = int(self._teeth.solver.local.shape[0])
+        # Triton's options for the kernel: keep enable_fp_fusion off; softenv bench tries register caps (maxnreg)
+        self.launch_options: dict[str, Any] = dict(COMPILE_OPTIONS)
 
     def compile_substep(self, options: dict[str, Any]) -> None:
         """Nothing: the kernel is compiled already, and Triton's code is not inductor's to redo (the env
@@ -557,6 +559,6 @@ class LaryngoscopeFused(LaryngoscopeTensors):
 
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
         command = torch.stack(torch.broadcast_tensors(vX, vY, spin, v_lat)).to(torch.float64).contiguous()
-        _control_period[(triton.cdiv(self.n, BLOCK),)](**self.kernel_arguments(command, count), **COMPILE_OPTIONS)
+        _control_period[(triton.cdiv(self.n, BLOCK),)](**self.kernel_arguments(command, count), **self.launch_options)
         self._touched.fill_(False)                  # the kernel starts every device's contact afresh
         self._forget()
