@@ -411,7 +411,7 @@ def device_alone_rows(device: str, name: str, n: int, calls: int) -> list[Row]:
     import torch                                            # torch: the rl extra
 
     from ..devices.laryngoscope.part import laryngoscope_parts  # pymunk: the rl extra
-    from ..devices.laryngoscope.part_tensors import fused_available, tensor_engine
+    from ..devices.laryngoscope.part_tensors import fused_available, tensor_engine  # torch, pymunk: the rl extra
 
     world = World(scene_config(HAPTIC_SCENES[HAPTIC_ID], {}))
     parts, torch_device = laryngoscope_parts(world.scene, world.config), torch.device(device)
