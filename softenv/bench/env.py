@@ -339,9 +339,7 @@ def device_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> l
             try:
                 rate = n / torch_step_timing(n, device, torch.float32, "device", mode, calls, cuda_graph).median
             except Exception as exc:           # a first try on new hardware: report it, go on with the rest
-                message = " ".join(str(exc).split())             # one line: it is a table cell
-                failure = f"failed: {type(exc).__name__}: {message}"[:200]
-                rows.append(Row("gpu", label, float("nan"), "", failure, ok=False))
+                rows.append(failed_row("gpu", label, exc))
                 continue
             rows.append(Row("gpu", label, rate, "env-steps/s", f"{rate / numpy_rate:.1f}x the numpy twin",
                             f">= {target / 1e6:.0f}M" if target else "", rate >= target if target else None))
@@ -388,9 +386,7 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
                                              cuda_graph=graphed, env_id=HAPTIC_ID, warmup=None if compiled else 2,
                                              batch_engine=batch_engine).median
             except Exception as exc:           # out of memory at the largest size: report it, go on
-                message = " ".join(str(exc).split())
-                rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
-                                ok=False))
+                rows.append(failed_row("gpu-haptic", label, exc))
                 continue
             best = max(best, (rate, f"{how}, {n:,} envs"))
             rows.append(Row("gpu-haptic", label, rate, "env-steps/s"))
@@ -432,9 +428,7 @@ def device_alone_rows(device: str, name: str, n: int, calls: int) -> list[Row]:
                 engine.control_step(a)
             rate = n / synchronized_timing(lambda i: engine.control_step(actions[i % len(actions)]), calls, device).median
         except Exception as exc:           # out of memory, a register cap Triton refuses: report it, go on
-            message = " ".join(str(exc).split())
-            rows.append(Row("gpu-haptic", label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200],
-                            ok=False))
+            rows.append(failed_row("gpu-haptic", label, exc))
             continue
         rows.append(Row("gpu-haptic", label, rate, "device-steps/s"))
     return rows
@@ -507,6 +501,12 @@ def synchronized_timing(call: Any, calls: int, device: str) -> Timing:
         _synchronize(device)
         samples.append((time.perf_counter() - t0) / calls)
     return Timing(np.array(samples))
+
+
+def failed_row(section: str, label: str, exc: Exception) -> Row:
+    """The row of a timing that raised: its error in one line (a table cell), not met."""
+    message = " ".join(str(exc).split())
+    return Row(section, label, float("nan"), "", f"failed: {type(exc).__name__}: {message}"[:200], ok=False)
 
 
 def _compiled_label(mode: str | None, cuda_graph: bool = False) -> str:
