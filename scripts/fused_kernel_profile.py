@@ -35,7 +35,7 @@ from softenv.envs.config import scene_config
 from softenv.envs.world import World
 
 TOOLS = Path(triton.__file__).parent / "backends" / "nvidia" / "bin"
-FP64 = ("DADD", "DMUL", "DFMA")
+FP64 = re.compile(r"^(?:@!?U?P\w+\s+)?D(?:ADD|MUL|FMA)\b")     # a float64 add, multiply or fma, predicated or not
 
 
 class CompileOnlyDriver:
@@ -64,7 +64,7 @@ def compile_kernel(scene: str, capability: int) -> tuple[Any, dict[str, Any]]:
     device = fused.LaryngoscopeFused(*laryngoscope_parts(world.scene, world.config), fused.BLOCK)
     command = torch.zeros((4, device.n), dtype=torch.float64)
     arguments = device.kernel_arguments(command, device.n_substeps)
-    kernel = fused._control_period.warmup(**arguments, **fused.COMPILE_OPTIONS, grid=(1,))
+    kernel = fused._control_period.warmup(**arguments, **device.launch_options, grid=(1,))
     return kernel, arguments
 
 
@@ -81,6 +81,13 @@ def ptxas_report(ptx: str, capability: int, work: Path) -> dict[str, int]:
     return dict(zip(("stack_bytes", "spill_store_bytes", "spill_load_bytes", "registers"), numbers))
 
 
+def counts(body: list[str]) -> dict[str, int]:
+    """A stretch of disassembly's instructions, float64 arithmetic, local-memory accesses and calls."""
+    return {"instructions": len(body), "fp64": sum(bool(FP64.match(t.strip())) for t in body),
+            "local_loads": sum("LDL" in t for t in body), "local_stores": sum("STL" in t for t in body),
+            "calls": sum("CALL" in t for t in body)}
+
+
 def loops(cubin: bytes, work: Path) -> list[dict[str, Any]]:
     """Each loop of the disassembly (a branch back to an earlier address): its instructions, float64
     arithmetic and local-memory accesses (spills)."""
@@ -94,20 +101,12 @@ def loops(cubin: bytes, work: Path) -> list[dict[str, Any]]:
         back = re.search(r"\bBRA (?:\S+, )?0x([0-9a-f]+)", text)
         if back and int(back.group(1), 16) < address:
             body = [t for a, t in code if int(back.group(1), 16) <= a <= address]
-            found.append({"start": f"{int(back.group(1), 16):#x}", "end": f"{address:#x}",
-                          "instructions": len(body),
-                          "fp64": sum(any(op in t.split()[0] for op in FP64) for t in body if t.strip()),
-                          "local_loads": sum("LDL" in t for t in body),
-                          "local_stores": sum("STL" in t for t in body),
-                          "calls": sum("CALL" in t for t in body)})
+            found.append({"start": f"{int(back.group(1), 16):#x}", "end": f"{address:#x}", **counts(body)})
     outer = max(found, key=lambda x: x["instructions"], default=None)
     for x in found:
         inside = outer is not None and int(outer["start"], 16) <= int(x["start"], 16) <= int(x["end"], 16) <= int(outer["end"], 16)
         x["role"] = "substeps" if x is outer else "solver iterations" if inside else "other (a slow path's)"
-    found.append({"role": "whole kernel", "start": "", "end": "", "instructions": len(code),
-                  "fp64": sum(any(op in t.split()[0] for op in FP64) for _, t in code if t.strip()),
-                  "local_loads": sum("LDL" in t for _, t in code), "local_stores": sum("STL" in t for _, t in code),
-                  "calls": sum("CALL" in t for _, t in code)})
+    found.append({"role": "whole kernel", "start": "", "end": "", **counts([t for _, t in code])})
     return found
 
 
