@@ -366,8 +366,8 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
         rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
     # on CPU the tensor engine's eager row alone (bench_torch times its compiled substep there: a compile takes
-    # minutes); on CUDA the fused kernel (the default) and the tensor engine, each eager and recorded, and the
-    # fused kernel with the env compiled (inductor's CUDA code for the tensor engine's substep is refused)
+    # minutes); on CUDA first the fused kernel (the default), eager and recorded, each with the env compiled
+    # too, then the tensor engine eager (inductor's CUDA code for its substep is refused)
     from ..devices.laryngoscope.part_tensors import fused_available  # torch and pymunk: the rl extra
 
     variants = [("tensor engine", "numpy", False, False)]       # (engine, batch_engine, compiled, graphed)
