@@ -266,6 +266,13 @@ def _torch_ppo_budget() -> int:
     return Args.total_timesteps
 
 
+def _listed(value: int | dict[str, int]) -> str:
+    """A number, or numbers by name, as a report's prose writes them: ``SoftSphere-v0 1, SoftSphereHaptic-v0 0``."""
+    if isinstance(value, dict):
+        return ", ".join(f"{name} {number:,}" for name, number in value.items())
+    return f"{value:,}"
+
+
 def _oracle_text(plan: Plan) -> str:
     """The device oracle's search settings as the plan runs it (its defaults, then the plan's)."""
     defaults = {name: p.default for name, p in inspect.signature(TrajectoryOracle).parameters.items()
@@ -398,7 +405,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
-          f"agents, pooled); training seeds per agent: {plan.seeds}; agent budgets (env steps): {budgets}. Cells: "
+          f"agents, pooled); training seeds per agent: {_listed(plan.seeds)}; agent budgets (env steps): "
+          f"{'; '.join(f'{a} {_listed(b)}' for a, b in budgets.items()) or 'none'}. Cells: "
           "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
           "E_oracle) per episode, E = the episode's summed RMS shape error on its target; 0 = no force, 100 = the planning "
           "oracle: on the ideal device the true response and creep planned ahead (`baselines.policies.PlanningOracle`), "

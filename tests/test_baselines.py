@@ -206,6 +206,9 @@ def test_compare_writes_the_report_with_its_command(tmp_path):
     md = (tmp_path / "benchmark.md").read_text()
     assert "softenv compare --test" in md and "| SoftSphere-v0 | oracle |" in md
     assert "candidates 4, iterations 2, elites 2" in md           # the device oracle's search, as it ran
+    protocol = next(line for line in md.splitlines() if line.startswith("Protocol:"))
+    assert "seeds per agent: SoftSphere-v0 1, SoftSphereHaptic-v0 1; agent budgets (env steps): none." in protocol
+    assert "{" not in protocol                                     # prose, not a dict's repr
     # the laryngoscope's clinical metrics: in their own table, and in the CSV (empty on the ideal scene)
     oracle, expert = summaries[1], summaries[5]
     assert oracle["normalized_score"]["mean"] == pytest.approx(100.0)
