@@ -4,10 +4,12 @@ finishes and read back by the next run of the same plan, so a ``softenv compare`
 stopped, bit for bit but for the wall-clock columns.
 
 An entry is an ``.npz`` artifact (no pickle, written by rename) named after its job's key. Its header
-holds the job's fingerprint: the function, its arguments, softenv's version and a digest of the code
-that computes results (the sources of ``softenv`` and ``baselines``, the agents' YAML). An entry whose
-fingerprint differs (another plan, other settings, changed code), or that cannot be read, is never
-used: its job runs again and the new result replaces it.
+holds the job's fingerprint: the function, its arguments, softenv's version, a digest of the code
+that computes results (the sources of ``softenv`` and ``baselines``, the agents' YAML) and the kernel
+set numpy's OpenBLAS runs (``OPENBLAS_CORETYPE`` or the CPU picks it; it changes the last bits of every
+product, so the report's command line names it). An entry whose fingerprint differs (another plan,
+other settings, changed code, other BLAS kernels), or that cannot be read, is never used: its job runs
+again and the new result replaces it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 
 import softenv
 from softenv._artifact import load_artifact, save_artifact
+from softenv._blas import openblas_kernels
 from softenv.parallel import Job, JobResult
 
 from .evaluate import Episodes
@@ -47,6 +50,7 @@ class RunStore:
     def __init__(self, runs_dir: Path) -> None:
         self.dir = Path(runs_dir) / "jobs"
         self.code = code_digest()
+        self.blas_kernels = openblas_kernels()
 
     def path(self, job: Job) -> Path:
         slug = re.sub(r"[^A-Za-z0-9.-]+", "_", job.key).strip("_")
@@ -54,7 +58,7 @@ class RunStore:
 
     def fingerprint(self, job: Job) -> str:
         what = {"fn": f"{job.fn.__module__}.{job.fn.__qualname__}", "args": job.args, "softenv": softenv.__version__,
-                "code": self.code}
+                "code": self.code, "blas_kernels": self.blas_kernels}
         return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()
 
     def load(self, job: Job) -> tuple[JobResult | None, str]:
@@ -67,7 +71,7 @@ class RunStore:
             if meta.get("key") != job.key:
                 return None, f"{path.name} holds job {meta.get('key')!r}"
             if meta.get("fingerprint") != self.fingerprint(job):
-                return None, "made by other settings or other code"
+                return None, "made by other settings, other code or other BLAS kernels"
             value = _decode(meta["value"], arrays)
             return JobResult(job.key, value, attempts=int(meta["attempts"]), wall_s=float(meta["wall_s"])), ""
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
