@@ -266,11 +266,12 @@ def _torch_ppo_budget() -> int:
     return Args.total_timesteps
 
 
-def _listed(value: int | dict[str, int]) -> str:
-    """A number, or numbers by name, as a report's prose writes them: ``SoftSphere-v0 1, SoftSphereHaptic-v0 0``."""
+def _listed(value: Any) -> str:
+    """A value, or values by name, as a report's prose writes them: ``SoftSphere-v0 1, SoftSphereHaptic-v0 0``
+    (integers with thousands separators)."""
     if isinstance(value, dict):
-        return ", ".join(f"{name} {number:,}" for name, number in value.items())
-    return f"{value:,}"
+        return ", ".join(f"{name} {_listed(v)}" for name, v in value.items())
+    return f"{value:,}" if isinstance(value, int) and not isinstance(value, bool) else str(value)
 
 
 def _oracle_text(plan: Plan) -> str:
@@ -278,7 +279,7 @@ def _oracle_text(plan: Plan) -> str:
     defaults = {name: p.default for name, p in inspect.signature(TrajectoryOracle).parameters.items()
                 if p.default is not inspect.Parameter.empty}
     settings = {**defaults, **plan.oracle}
-    return ", ".join(f"{k} {v}" for k, v in settings.items())
+    return _listed(settings)
 
 
 def _anchored(episodes: Episodes, zero: np.ndarray, oracle: np.ndarray) -> Episodes:

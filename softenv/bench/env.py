@@ -357,7 +357,7 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
     Triton kernel, eager and recorded as CUDA graphs (``cuda_graph=True``), and with the env's work compiled
     around it (``compile_options``, at the largest size only: each compile takes most of a minute), after a
     check that the default engine's steps never synchronise with the host. The best is held to the issue's
-    target. (The tensor engine recorded gained 1.1x at 1M envs on an H200: docs/laryngoscope.md.)"""
+    target."""
     import torch                                            # torch: the rl extra
 
     rows = []
