@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import shutil
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from softenv.envs.config import config_key, make_config
 from .evaluate import scene_kwargs
 from .policies import SB3Policy
 
-HYPERPARAMS = Path(__file__).parent / "hyperparams"
+HYPERPARAMS = files(__package__ or "softenv.baselines") / "hyperparams"     # package data
 # name -> (SB3 class name, YAML file); the observation mode and any scene settings come from the
 # YAML's env_kwargs, as rl-zoo3 reads them
 ALGOS: dict[str, tuple[str, str]] = {

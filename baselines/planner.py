@@ -112,7 +112,7 @@ class TrajectoryOracle(ReplayPolicy):
 
     def plan(self, warm_start: Any, episodes: int, seed: int = 1000) -> np.ndarray:
         """Plan the ``episodes`` evaluation episodes seeded ``seed, seed + 1, ...`` (as
-        :func:`~baselines.evaluate.evaluate` seeds them), starting from ``warm_start``'s actions;
+        :func:`~softenv.baselines.evaluate.evaluate` seeds them), starting from ``warm_start``'s actions;
         returns each episode's best summed shape error."""
         started = time.perf_counter()
         recorder = RecordingPolicy(warm_start)

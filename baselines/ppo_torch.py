@@ -8,7 +8,7 @@ normaliser, one training loop (rollout -> GAE -> clipped updates), then evaluati
 targets with the benchmark's protocol (``baselines.evaluate``: 100 episodes, normalized score
 against the scene's oracle).
 
-    python -m baselines.ppo_torch --scene SoftSphere-v0 --seeds 0 1 2 3 4 --device cpu --jobs 2 \\
+    python -m softenv.baselines.ppo_torch --scene SoftSphere-v0 --seeds 0 1 2 3 4 --device cpu --jobs 2 \\
         --report results/ppo-torch.md
 
 Hyper-parameters follow ``baselines/hyperparams/ppo.yml`` (SB3's PPO on the same scene): 16 envs x
@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", help="folder for the weights (ppo-torch-<seed>.pt)")
     p.add_argument("--report", type=Path, help="write the results as Markdown here")
     a = p.parse_args(argv)
-    command = "python -m baselines.ppo_torch " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
+    command = "python -m softenv.baselines.ppo_torch " + " ".join(shlex.quote(x) for x in (argv if argv is not None else sys.argv[1:]))
     torch.set_num_threads(1)
     zero, oracle, _ = anchor_job(a.scene, a.episodes, {})
     jobs = [Job(f"seed {seed}", seed_job, (Args(scene=a.scene, seed=seed, device=a.device, target_draw=a.target_draw,

@@ -1,7 +1,7 @@
 """Train one SB3 agent on a SoftSphere scene.
 
-    python -m baselines.train --algo sac --scene SoftSphere-v0 --seed 0 --out runs/sac-0
-    python -m baselines.train --algo ppo --timesteps 20000 --out runs/ppo-quick
+    python -m softenv.baselines.train --algo sac --scene SoftSphere-v0 --seed 0 --out runs/sac-0
+    python -m softenv.baselines.train --algo ppo --timesteps 20000 --out runs/ppo-quick
 
 Hyper-parameters come from ``baselines/hyperparams/<algo>.yml`` (rl-zoo3 format). Logs: CSV and
 TensorBoard under ``OUT/logs``, evaluations on the test targets under ``OUT/eval``. The run is written

@@ -51,9 +51,9 @@ API = {
                                             "softenv.training.bridge.BridgeClient"],
     "Fan-out": ["softenv.parallel.run_jobs", "softenv.parallel.Job", "softenv.parallel.Interrupted",
                 "softenv.parallel.stop_on_signals"],
-    "Baselines and agents": ["baselines.agents.train_agent", "baselines.agents.load_agent",
-                             "baselines.evaluate.evaluate", "baselines.evaluate.normalized_scores",
-                             "baselines.anchors.anchor_job", "baselines.benchmark.run"],
+    "Baselines and agents": ["softenv.baselines.agents.train_agent", "softenv.baselines.agents.load_agent",
+                             "softenv.baselines.evaluate.evaluate", "softenv.baselines.evaluate.normalized_scores",
+                             "softenv.baselines.anchors.anchor_job", "softenv.baselines.benchmark.run"],
 }
 
 

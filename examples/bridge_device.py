@@ -3,7 +3,7 @@
 Start a session that waits for a device (``softenv play --bridge 9870``), then, in another process,
 on this machine or another:
 
-    python examples/bridge_device.py 127.0.0.1:9870 examples/device_logs/expert.csv
+    python examples/bridge_device.py 127.0.0.1:9870 softenv/training/examples/device_logs/expert.csv
 
 It sends the log's poses (relative to its first row; x, z, pitch, y) one control period apart and
 prints the forces the session renders back. ``--lockstep`` waits for each pose's answer before the

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import ks_2samp
 
-from baselines.benchmark import baseline_job
+from softenv.baselines.benchmark import baseline_job
 from softenv._artifact import write_text
 from softenv.envs import HAPTIC_SCENES
 

@@ -1,7 +1,7 @@
 """Learning curves of the stable-baselines3 agents on a laryngoscope scene, past the benchmark's
 budgets (issue 37, part 5): several seeds, the mean and 95 % band of the test return against env steps,
 and each agent's normalized score beside the scripted expert's, with bootstrap intervals. It runs
-``softenv compare``'s machinery (``baselines.benchmark.run``) on a plan of its own, so a stopped run
+``softenv compare``'s machinery (``softenv.baselines.benchmark.run``) on a plan of its own, so a stopped run
 resumes from ``--runs`` and the tables and plots are the benchmark's.
 
     python scripts/haptic_learning_curves.py --scene SoftSphereHapticProcedure-v0 \
@@ -16,8 +16,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from baselines.benchmark import ALGOS, Plan, run
-from baselines.evaluate import SCENES
+from softenv.baselines.benchmark import ALGOS, Plan, run
+from softenv.baselines.evaluate import SCENES
 
 
 def main(argv: list[str] | None = None) -> None:

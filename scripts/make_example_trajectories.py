@@ -1,10 +1,10 @@
 """Write the example trainee logs as CSV.
 
-    python scripts/make_example_trajectories.py --out examples
+    python scripts/make_example_trajectories.py --out softenv/training/examples
 
-``examples/device_logs/``: hand poses as a haptic device records them (softenv.training.trainee): the scripted
+``device_logs/``: hand poses as a haptic device records them (softenv.training.trainee): the scripted
 expert, and trainees who lever on the teeth, press too hard, hesitate with a tremor, and sweep the
-wrong way. ``examples/trajectories/``: force commands for the ideal device (softenv.training.scoring).
+wrong way. ``trajectories/``: force commands for the ideal device (softenv.training.scoring).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ DEVICE_LOGS = {"expert": {}, "levers_on_teeth": {"lever": 0.3}, "too_forceful": 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", default="examples")
+    parser.add_argument("--out", default="softenv/training/examples")   # shipped with the package
     args = parser.parse_args()
     made_by = f"made by: python scripts/make_example_trajectories.py --out {args.out}"
     for style in STYLES:

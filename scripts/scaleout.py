@@ -46,7 +46,7 @@ def cells(report: dict) -> str:
 
 def job_seconds(report: dict) -> tuple[float, float]:
     """The run's per-job wall times added up: agent jobs (training and evaluation), and all the others."""
-    from baselines.benchmark import AGENTS
+    from softenv.baselines.benchmark import AGENTS
 
     timings = report["timings_s"]            # keyed "<scene> <policy>"; an agent's seeds are summed in one entry
     agents = sum(t for key, t in timings.items() if key.rsplit(" ", 1)[-1] in AGENTS)

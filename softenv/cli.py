@@ -17,7 +17,7 @@ from typing import Any, Callable, NoReturn
 
 import numpy as np
 
-from baselines import benchmark
+from softenv.baselines import benchmark
 
 from . import bench
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
@@ -29,7 +29,7 @@ from ._validation import check_int, check_real, printable
 from .training import play
 from .training.bridge import LOOPBACK
 from .training.inputs import CONTROLS
-from .training.logs import MAX_DURATION_S
+from .training.logs import EXAMPLES, MAX_DURATION_S, example_log
 from .training.scoring import score_file
 
 
@@ -181,15 +181,16 @@ def cmd_score(args: argparse.Namespace) -> None:
     scene = None                      # the log's own scene (or, for a log that records none, the id's)
     if args.scene is not None or args.law is not None:
         scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"}}
-    report = score_file(args.trajectory, scene, args.out)
+    path = example_log(args.example) if args.example else Path(args.trajectory)
+    report = score_file(path, scene, args.out)
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
     parts = ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"])
-    print(printable(f"{args.trajectory} ({report['log']}): score {report['score']:.1f}/100 ({parts}); final error "
+    print(printable(f"{args.example or args.trajectory} ({report['log']}): score {report['score']:.1f}/100 ({parts}); final error "
           f"{m['final_error_mm']:.3f} mm, time to target {ttt}, peak tongue force {m['peak_force_N']:.1f} N"
           + (f", peak incisor force {m['clinical']['peak_incisor_force_N']:.1f} N" if "clinical" in m else "")))
     if args.out:
-        print(printable(f"wrote {args.out}/{Path(args.trajectory).stem}_score.json, .md, .png"))
+        print(printable(f"wrote {args.out}/{path.stem}_score.json, .md, .png"))
 
 
 def cmd_play(args: argparse.Namespace) -> None:
@@ -337,8 +338,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")
 
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
-    p.add_argument("trajectory", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, hand_y_m) or a "
-                                      "force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
+    log = p.add_mutually_exclusive_group(required=True)
+    log.add_argument("trajectory", nargs="?", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, "
+                     "hand_y_m) or a force-command log (time_s, insertion_deg, lateral_deg, normal_N, sideways_N)")
+    log.add_argument("--example", choices=EXAMPLES, metavar="NAME",
+                     help=f"a log shipped with softenv instead of a file: {', '.join(EXAMPLES)}")
     p.add_argument("--scene", choices=["quasi_static", "viscoelastic"],
                    help="tissue dynamics of the replay: quasi_static or viscoelastic. A log records its scene and "
                         "is replayed on it (a contradicting --scene or --law is refused); for an old log that "

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run, seed_label
-from baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
-from baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
+from softenv.baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
+from softenv.baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run, seed_label
+from softenv.baselines.evaluate import SCENES, bootstrap_ci, evaluate, iqm, scene_kwargs
+from softenv.baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.control import HandController
 from softenv.envs.config import make_config
 from softenv.envs.world import World
@@ -142,7 +142,7 @@ def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(
 
 
 def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monkeypatch):
-    from baselines.run_store import RunStore
+    from softenv.baselines.run_store import RunStore
     from softenv.parallel import Interrupted
 
     plan = Plan(["SoftSphere-v0"], ["zero", "direct-poly3"], ["sac"], {"SoftSphere-v0": 2}, {"sac": 1100}, episodes=4)
@@ -186,7 +186,7 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     assert sum("made by other settings, other code or other BLAS kernels" in line for line in lines) == 5
     # ... and so is one made under other BLAS kernels (they change the last bits of every product)
     lines.clear()
-    monkeypatch.setattr("baselines.run_store.openblas_kernels", lambda: "SomeOtherCPU")
+    monkeypatch.setattr("softenv.baselines.run_store.openblas_kernels", lambda: "SomeOtherCPU")
     run(plan, tmp_path, tmp_path / "runs", "test", echo=lines.append, write=False)
     assert sum("made by other settings, other code or other BLAS kernels" in line for line in lines) == 5
 
@@ -365,7 +365,7 @@ def test_the_baselines_load_without_pymunk(heavy_modules_after):
     """``softenv[rl]`` without the device extra: the baselines import neither pymunk (the laryngoscope's
     observation scales live outside its module) nor torch; the torch PPO's driver (baselines/ppo_torch.py)
     imports them, and on a machine without pymunk failed."""
-    code = "import baselines.benchmark, baselines.policies, baselines.evaluate, softenv.control\n"
+    code = "import softenv.baselines.benchmark, softenv.baselines.policies, softenv.baselines.evaluate, softenv.control\n"
     assert heavy_modules_after(code) == []
 
 

@@ -16,7 +16,7 @@ from hypothesis import given, settings, strategies as st
 from softenv.training import play
 from softenv.training.bridge import (COUNTS, FORCE, POSE, BridgeClient, BridgeServer, encode_force, encode_pose,
                                      decode, FORCE_MAGIC)
-from softenv.training.logs import read_log
+from softenv.training.logs import example_log, read_log
 from softenv.training.scoring import score_file
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -128,7 +128,7 @@ def test_a_simulated_device_process_drives_a_session_that_scores_like_its_log(tm
     session follows it, the device gets a force for every pose, and the session's log scores as the
     expert's own log does."""
     play.headless()
-    expert = ROOT / "examples" / "device_logs" / "expert.csv"
+    expert = example_log("device_logs/expert")
     _, table = read_log(expert)
     bridge = play.open_bridge()
     device = subprocess.Popen([sys.executable, str(ROOT / "examples" / "bridge_device.py"),

@@ -58,7 +58,7 @@ def test_rl_zoo3_trains_and_evaluates_on_test_targets_with_each_shipped_yaml(tmp
 
 def test_agents_take_the_observation_mode_from_the_yaml_not_the_algorithm():
     pytest.importorskip("stable_baselines3")
-    from baselines.agents import agent_env_kwargs, hyperparams
+    from softenv.baselines.agents import agent_env_kwargs, hyperparams
 
     assert hyperparams("sac-her", "SoftSphere-v0")["env_kwargs"] == {"obs_mode": "dict"}
     env_id, kwargs = agent_env_kwargs("sac-her", "SoftSphere-v0/stiffening", split="train")
@@ -277,7 +277,7 @@ def test_executor_rejects_bad_arguments():
 
 
 def _tiny_plan():
-    from baselines.benchmark import Plan
+    from softenv.baselines.benchmark import Plan
 
     return Plan(["SoftSphere-v0"], ["zero", "direct-poly3"], ["sac"], {"SoftSphere-v0": 2}, {"sac": 1100}, episodes=8)
 
@@ -290,14 +290,14 @@ def _cells(summaries: list[dict]) -> str:
 @pytest.fixture(scope="module")
 def local_grid(tmp_path_factory):
     pytest.importorskip("stable_baselines3")
-    from baselines.benchmark import run
+    from softenv.baselines.benchmark import run
 
     runs = tmp_path_factory.mktemp("runs-local")
     return run(_tiny_plan(), runs, runs, "test", echo=lambda s: None, write=False)
 
 
 def test_compare_over_two_local_workers_equals_one_process(tmp_path, local_grid):
-    from baselines.benchmark import run
+    from softenv.baselines.benchmark import run
 
     parallel = run(_tiny_plan(), tmp_path, tmp_path / "runs", "test", echo=lambda s: None, write=False, n_jobs=2)
     assert _cells(parallel) == _cells(local_grid)
@@ -306,7 +306,7 @@ def test_compare_over_two_local_workers_equals_one_process(tmp_path, local_grid)
 
 def test_compare_on_a_local_ray_instance_equals_the_local_executor(tmp_path, local_grid):
     ray = pytest.importorskip("ray")
-    from baselines.benchmark import run
+    from softenv.baselines.benchmark import run
 
     os.environ.pop("RAY_ADDRESS", None)
     with_ray = run(_tiny_plan(), tmp_path, tmp_path / "runs", "test", echo=lambda s: None, write=False,

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from baselines.evaluate import evaluate, scene_kwargs
-from baselines.planner import RecordingPolicy, ReplayPolicy, TrajectoryOracle
-from baselines.policies import make_baseline
+from softenv.baselines.evaluate import evaluate, scene_kwargs
+from softenv.baselines.planner import RecordingPolicy, ReplayPolicy, TrajectoryOracle
+from softenv.baselines.policies import make_baseline
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 

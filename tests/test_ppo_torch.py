@@ -6,9 +6,9 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from baselines.evaluate import evaluate, scene_kwargs  # noqa: E402
-from baselines.policies import make_baseline  # noqa: E402
-from baselines.ppo_torch import Args, TorchPolicy, load, main, save, train  # noqa: E402
+from softenv.baselines.evaluate import evaluate, scene_kwargs  # noqa: E402
+from softenv.baselines.policies import make_baseline  # noqa: E402
+from softenv.baselines.ppo_torch import Args, TorchPolicy, load, main, save, train  # noqa: E402
 from softenv.envs.config import make_config  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 
@@ -67,7 +67,7 @@ def test_weights_load_back_and_mismatches_are_refused(trained, tmp_path):
 
 
 def test_compare_runs_ppo_torch_on_the_ideal_scenes_and_says_where(tmp_path):
-    from baselines.benchmark import Plan, run
+    from softenv.baselines.benchmark import Plan, run
 
     plan = Plan(["SoftSphere-v0"], ["zero"], ["ppo-torch"], {"SoftSphere-v0": 1}, {"ppo-torch": 16 * 128 * 2}, episodes=5)
     lines = []

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import softenv  # noqa: F401
+from softenv.training.logs import example_log
 
 BAD_TARGETS = [np.full(4, 2.0), np.zeros(4, complex), ["0.1"] * 4, {"a": 1}, np.zeros(3)]
 
@@ -194,7 +195,7 @@ def test_score_refuses_an_existing_file_as_out_before_any_work(tmp_path, capsys,
     monkeypatch.setattr(scoring, "replay", lambda *a, **k: calls.append(1))
     taken = tmp_path / "taken"
     taken.write_text("x")
-    code, err = _score(capsys, "examples/trajectories/expert.csv", "--out", str(taken))
+    code, err = _score(capsys, str(example_log("trajectories/expert")), "--out", str(taken))
     assert code == 2 and "exists and is not a directory" in err and not calls
 
 

@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from softenv.envs import make_config
-from softenv.training.logs import FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
+from softenv.training.logs import EXAMPLES_DIR, FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
 from softenv.training.scoring import (ADVICE, COLUMNS, expert_trajectory, improvements, load_trajectory,
                                       points_to_gain, replay, replay_hand, save_trajectory, score_file, score_hand_log)
 from softenv.training.trainee import (LOWERS, WORST, degrade, expert_hand_log, skill_population, spearman,
                                       withdrawn)
 
 ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = ROOT / "examples" / "trajectories"
-DEVICE_LOGS = ROOT / "examples" / "device_logs"
+EXAMPLES = EXAMPLES_DIR / "trajectories"
+DEVICE_LOGS = EXAMPLES_DIR / "device_logs"
 
 
 @pytest.fixture(scope="module")
@@ -39,10 +39,10 @@ def test_examples_are_made_by_the_committed_script(tmp_path):
     subprocess.run([sys.executable, str(ROOT / "scripts" / "make_example_trajectories.py"), "--out", str(tmp_path)],
                    check=True, capture_output=True)
     made = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*.csv"))
-    assert made == sorted(p.relative_to(ROOT / "examples") for p in (ROOT / "examples").rglob("*.csv"))
+    assert made == sorted(p.relative_to(EXAMPLES_DIR) for p in EXAMPLES_DIR.rglob("*.csv"))
     for rel in made:
         ours = [line for line in (tmp_path / rel).read_text().splitlines() if not line.startswith("#")]
-        shipped = [line for line in (ROOT / "examples" / rel).read_text().splitlines() if not line.startswith("#")]
+        shipped = [line for line in (EXAMPLES_DIR / rel).read_text().splitlines() if not line.startswith("#")]
         assert ours == shipped, rel
 
 

@@ -311,7 +311,7 @@ def test_a_long_valid_log_is_read_in_bounded_memory(tmp_path, tried):
 
 def test_a_benchmark_report_is_written_all_or_nothing(tmp_path, monkeypatch, tried):
     """softenv compare's report set (tables and figures): a failing figure leaves no file, not even the tables."""
-    from baselines import benchmark
+    from softenv.baselines import benchmark
 
     tried["all-or-nothing writes"] += 1
     plan = benchmark.Plan(["SoftSphere-v0"], ["zero"], [], {"SoftSphere-v0": 1}, episodes=2)

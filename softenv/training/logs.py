@@ -51,6 +51,7 @@ import csv
 import json
 import zipfile
 from dataclasses import dataclass
+from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +80,18 @@ class Schema:
 FORCE_LOG = Schema("force commands", ("time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N"))
 HAND_LOG = Schema("hand poses", ("time_s", "hand_x_m", "hand_z_m", "hand_pitch_rad", "hand_y_m"))
 SCHEMAS = (FORCE_LOG, HAND_LOG)
+# the example logs the docs score, shipped with the package (scripts/make_example_trajectories.py writes them)
+EXAMPLES_DIR = Path(str(files(__package__ or "softenv.training") / "examples"))
+EXAMPLES = tuple(sorted(f"{folder.name}/{log.stem}" for folder in EXAMPLES_DIR.iterdir() if folder.is_dir()
+                        for log in folder.glob("*.csv")))
+
+
+def example_log(name: str) -> Path:
+    """The shipped example log ``name`` (``device_logs/expert``, ``trajectories/too_forceful``: see
+    ``EXAMPLES``), wherever the package is installed."""
+    if name not in EXAMPLES:
+        raise ValueError(f"example {name!r} is not a shipped log; shipped: {', '.join(EXAMPLES)}")
+    return EXAMPLES_DIR / f"{name}.csv"
 
 
 def read_log(path: str | Path, schema: Schema | None = None) -> tuple[Schema, np.ndarray]:
