@@ -11,6 +11,15 @@ import gymnasium as gym
 import numpy as np
 
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES
+from softenv.stats import bootstrap_ci, iqm
+
+# The protocol: test targets only, episode i seeded FIRST_SEED + i, EPISODES of them. Bump the version when
+# anything a score depends on changes (the seeds, the error sum, the split): shipped anchors and leaderboard
+# results name it, and one made under another version is refused.
+PROTOCOL_VERSION = 1
+FIRST_SEED = 1000
+EPISODES = 100
+SPLIT = "test"
 
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
 # the laryngoscope scenes' clinical metrics (softenv.clinical), from info["clinical"] at each episode's end
@@ -32,13 +41,18 @@ SCENES: dict[str, tuple[str, dict[str, Any]]] = {
 }
 
 
+def test_seeds(episodes: int = EPISODES) -> list[int]:
+    """The seeds of the protocol's first ``episodes`` test episodes."""
+    return [FIRST_SEED + i for i in range(episodes)]
+
+
 def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, Any]]:
     """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets."""
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
     env_id, overrides = SCENES[scene]
     kwargs = {**{**ENV_SCENES, **HAPTIC_SCENES}[env_id], **overrides}
-    kwargs["task"] = {**kwargs.get("task", {}), "split": "test"}
+    kwargs["task"] = {**kwargs.get("task", {}), "split": SPLIT}
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
@@ -73,7 +87,7 @@ class Episodes:
         return out
 
 
-def evaluate(policy: Any, scene: str, episodes: int = 100, seed: int | list[int] = 1000,
+def evaluate(policy: Any, scene: str, episodes: int = EPISODES, seed: int | list[int] = FIRST_SEED,
              vectorization_mode: str = "vector_entry_point", **make: Any) -> Episodes:
     """Run ``episodes`` test episodes of ``policy`` at once (one per env of the batched twin, or with
     ``vectorization_mode="sync"`` of as many single envs), env ``i`` seeded ``seed + i`` (or ``seed[i]``);
@@ -133,21 +147,3 @@ def decision_latency_us(policy: Any, obs: np.ndarray, calls: int = 200) -> float
         policy.predict(row)
         samples[i] = time.perf_counter() - t0
     return float(np.median(samples) * 1e6)
-
-
-def bootstrap_ci(values: np.ndarray, n_boot: int = 2000, seed: int = 0) -> tuple[float, float, float]:
-    """Mean and its 95 % percentile-bootstrap interval."""
-    if values.size == 0:
-        return float("nan"), float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    means = values[rng.integers(0, values.size, (n_boot, values.size))].mean(axis=1)
-    return float(values.mean()), float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
-
-
-def iqm(values: np.ndarray) -> float:
-    """Interquartile mean: the mean of the middle 50 % (rliable's robust aggregate)."""
-    if values.size == 0:
-        return float("nan")
-    v = np.sort(values)
-    lo, hi = int(np.floor(0.25 * v.size)), int(np.ceil(0.75 * v.size))
-    return float(v[lo:max(hi, lo + 1)].mean())

@@ -19,7 +19,8 @@ The optimiser is the cross-entropy method (CEM) on the summed shape error itself
   them all out at once on the batched twin (one row per candidate), and refits mean and spread to the
   ``elites`` best; the best plan so far is always re-entered as a candidate (elitism), so the plan
   never gets worse than the warm start;
-* everything is seeded, so the plan (and the score's 100) is reproducible bit for bit.
+* everything is seeded, each episode by its own seed, so the plan (and the score's 100) is reproducible bit
+  for bit and an episode's plan is the same whichever episodes are planned beside it.
 
 Why not MPC over a receding horizon: with a model this exact a receding horizon only truncates the
 cost (the error still to come after the horizon), and its per-step replanning costs the horizon's
@@ -110,30 +111,33 @@ class TrajectoryOracle(ReplayPolicy):
         self.history: list[float] = []        # the mean best error sum after each iteration (mm x steps)
         self.decision_us = float("nan")       # planning wall time per decision of the plan
 
-    def plan(self, warm_start: Any, episodes: int, seed: int = 1000) -> np.ndarray:
-        """Plan the ``episodes`` evaluation episodes seeded ``seed, seed + 1, ...`` (as
+    def plan(self, warm_start: Any, episodes: int, seed: int | list[int] = 1000) -> np.ndarray:
+        """Plan the ``episodes`` evaluation episodes seeded ``seed, seed + 1, ...`` (or ``seed[i]``, as
         :func:`~softenv.baselines.evaluate.evaluate` seeds them), starting from ``warm_start``'s actions;
-        returns each episode's best summed shape error."""
+        returns each episode's best summed shape error. Each episode's search draws from a generator of
+        its own (seeded by the sampler's seed and the episode's), so an episode's plan does not depend on
+        which episodes are planned beside it."""
         started = time.perf_counter()
+        seeds = [seed + i for i in range(episodes)] if isinstance(seed, int) else list(seed)
         recorder = RecordingPolicy(warm_start)
-        best_error = evaluate(recorder, self.scene, episodes, seed).values["error_sum_mm"]
+        best_error = evaluate(recorder, self.scene, episodes, seeds).values["error_sum_mm"]
         base = np.stack(recorder.actions, axis=1).astype(np.float64)        # (n, H, 4)
         n, horizon = base.shape[:2]
         knots = np.arange(0, horizon + self.knot_every, self.knot_every)
         weights = _interpolation(horizon, knots)                            # (H, M)
-        rng = np.random.default_rng(self.seed)
+        rngs = [np.random.default_rng([self.seed, episode]) for episode in seeds]
         mean = np.zeros((n, len(knots), 4))
         best = mean.copy()
         best_actions = base.astype(np.float32)
         spread = np.full_like(mean, self.sigma)
-        seeds = [seed + i for i in range(n) for _ in range(self.candidates)]
+        rollout_seeds = [episode for episode in seeds for _ in range(self.candidates)]
         self.history = [float(best_error.mean())]
         for _ in range(self.iterations):
-            noise = rng.standard_normal((n, self.candidates - 1, len(knots), 4)) * spread[:, None]
+            noise = np.stack([rng.standard_normal((self.candidates - 1, len(knots), 4)) for rng in rngs]) * spread[:, None]
             trial = np.concatenate([best[:, None], mean[:, None] + noise], axis=1)     # (n, K, M, 4)
             actions = np.clip(base[:, None] + np.einsum("tm,nkmc->nktc", weights, trial), -1.0, 1.0)
             replay = ReplayPolicy(actions.reshape(n * self.candidates, horizon, 4))
-            error = evaluate(replay, self.scene, n * self.candidates, seeds).values["error_sum_mm"]
+            error = evaluate(replay, self.scene, n * self.candidates, rollout_seeds).values["error_sum_mm"]
             error = error.reshape(n, self.candidates)
             order = np.argsort(error, axis=1, kind="stable")
             improved = error[np.arange(n), order[:, 0]] < best_error

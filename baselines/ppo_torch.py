@@ -43,9 +43,10 @@ from softenv._artifact import atomic_write
 from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.torch_twin import usable_device
 from softenv.parallel import Interrupted, Job, describe, run_jobs
+from softenv.stats import bootstrap_ci
 
 from .anchors import anchor_job
-from .evaluate import SCENES, bootstrap_ci, evaluate, normalized_scores, scene_kwargs
+from .evaluate import SCENES, evaluate, normalized_scores, scene_kwargs
 
 FORMAT_VERSION = 2                # 2: the seed and budget it was trained with
 
