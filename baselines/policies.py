@@ -241,6 +241,30 @@ class SB3Policy:
         return np.clip(action, -1.0, 1.0).astype(np.float32)
 
 
+class CallablePolicy:
+    """A batched callable ``obs -> actions`` behind the policy interface: its actions as float32, of the
+    batch's shape (anything else is refused by name here; their range is the env's to check)."""
+
+    def __init__(self, fn: Callable[[Any], Any], name: str, obs_mode: str = "vector") -> None:
+        self.fn = fn
+        self.name = name
+        self.obs_mode = obs_mode
+
+    def reset(self) -> None:
+        pass
+
+    def predict(self, obs: Any) -> np.ndarray:
+        single = np.ndim(obs["observation"] if isinstance(obs, dict) else obs) == 1
+        if single:                    # one row (the latency probe): the callable still gets a batch, of one
+            obs = {k: np.asarray(v)[None] for k, v in obs.items()} if isinstance(obs, dict) else np.asarray(obs)[None]
+        rows = len(obs["observation"] if isinstance(obs, dict) else obs)
+        action = np.asarray(self.fn(obs), dtype=np.float32)
+        if action.shape != (rows, 4):
+            raise ValueError(f"policy {self.name!r} returned actions of shape {action.shape} for a batch of {rows} "
+                             f"observations; expected ({rows}, 4)")
+        return action[0] if single else action
+
+
 # -- construction by name ------------------------------------------------------------------------
 
 # the paper's regressors as policy models. The MLP is the paper's 4-7-9-k net trained by L-BFGS:

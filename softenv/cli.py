@@ -17,10 +17,11 @@ from typing import Any, Callable, NoReturn
 
 import numpy as np
 
-from softenv.baselines import benchmark
-
-from . import bench
+from . import bench, leaderboard
+from .baselines import benchmark
+from .baselines.evaluate import EPISODES, SCENES
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
+from .evaluation import evaluate_policy
 from .parallel import Interrupted, Job, run_jobs, stop_on_signals, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
 from .shape_model import ShapeModel
@@ -193,6 +194,59 @@ def cmd_score(args: argparse.Namespace) -> None:
         print(printable(f"wrote {args.out}/{path.stem}_score.json, .md, .png"))
 
 
+def load_policy(spec: str) -> Any:
+    """``module:attribute`` (the attribute may be dotted) -> that object; the working directory is importable,
+    as it is for ``python -m``."""
+    module_name, _, attribute = spec.partition(":")
+    if not module_name or not attribute:
+        raise ValueError(f"policy {spec!r} must be MODULE:ATTRIBUTE, e.g. my_agent:policy")
+    if "" not in sys.path and str(Path.cwd()) not in sys.path:
+        sys.path.insert(0, str(Path.cwd()))
+    try:
+        obj: Any = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ValueError(f"policy {spec!r}: module {module_name!r} does not import ({exc})") from None
+    for part in attribute.split("."):
+        if not hasattr(obj, part):
+            raise ValueError(f"policy {spec!r}: {module_name} has no attribute {attribute!r}")
+        obj = getattr(obj, part)
+    return obj
+
+
+def cmd_evaluate(args: argparse.Namespace, argv: list[str]) -> None:
+    if args.out is not None and args.episodes != EPISODES:
+        raise ValueError(f"--out writes a leaderboard result, which takes the protocol's {EPISODES} episodes; "
+                         f"--episodes {args.episodes} makes none (drop --out, or --episodes)")
+    result = evaluate_policy(load_policy(args.policy), args.scene, args.episodes, name=args.name or args.policy)
+    print(printable(str(result)))
+    if args.out is not None:
+        record = leaderboard.result_record(result, args.kind, "softenv " + bench.command_line(argv))
+        print(printable(f"wrote {leaderboard.save_result(record, args.out)} (softenv leaderboard check passes it)"))
+
+
+def cmd_leaderboard(args: argparse.Namespace) -> None:
+    if args.action == "check":
+        for path in args.files:
+            try:
+                got = leaderboard.check_result(leaderboard.read_result(path))
+            except ValueError as exc:
+                raise ValueError(f"{path}: {exc}") from None
+            print(printable(f"{path}: ok ({got['mean']:.1f} [{got['ci_low']:.1f}, {got['ci_high']:.1f}])"))
+        return
+    records = leaderboard.load_results(args.dir) if Path(args.dir).is_dir() else []
+    mine = []
+    for path in args.files:
+        record = leaderboard.read_result(path)
+        try:
+            leaderboard.check_result(record)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+        mine.append(record)
+    if not records and not mine:
+        raise ValueError(f"no results to show: {args.dir!r} holds none and no FILE was given")
+    print(leaderboard.table(records + mine, highlight=mine[0]["method"] if len(mine) == 1 else None))
+
+
 def cmd_play(args: argparse.Namespace) -> None:
     if importlib.util.find_spec("pygame") is None:
         raise ValueError("softenv play needs pygame (pip install 'softenv[play]')")
@@ -337,6 +391,26 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")
 
+    p = sub.add_parser("evaluate", help="score a policy of yours under the benchmark's protocol (normalized score with "
+                                        "95 %% intervals; --out writes a leaderboard result)")
+    p.add_argument("policy", help="MODULE:ATTRIBUTE naming a batched callable obs -> actions, a stable-baselines3 "
+                                  "model, or an object with predict(obs) and reset() (a list: one per training seed)")
+    p.add_argument("--scene", choices=list(SCENES), default="SoftSphere-v0", metavar="SCENE",
+                   help=f"a benchmark scene (default SoftSphere-v0): {', '.join(SCENES)}")
+    p.add_argument("--episodes", type=_bounded(int, 1, 100_000), default=EPISODES,
+                   help=f"test episodes (default and for --out: the protocol's {EPISODES})")
+    p.add_argument("--name", help="the method's name in the result (default: the policy's MODULE:ATTRIBUTE)")
+    p.add_argument("--kind", choices=list(leaderboard.KINDS), default="submission", help="the result's kind")
+    p.add_argument("--out", help="write the result file here (JSON; checked as softenv leaderboard check does)")
+
+    p = sub.add_parser("leaderboard", help="check result files, or show where they stand")
+    actions = p.add_subparsers(dest="action", required=True)
+    q = actions.add_parser("check", help="validate result files: schema, protocol, scene, anchors, aggregates")
+    q.add_argument("files", nargs="+", metavar="FILE")
+    q = actions.add_parser("show", help="the leaderboard of a folder of results, with FILEs among them")
+    q.add_argument("files", nargs="*", metavar="FILE")
+    q.add_argument("--dir", default="results/leaderboard", help="the folder of results (default: results/leaderboard)")
+
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     log = p.add_mutually_exclusive_group(required=True)
     log.add_argument("trajectory", nargs="?", help="a device log (time_s, hand_x_m, hand_z_m, hand_pitch_rad, "
@@ -382,6 +456,10 @@ def _dispatch(args: argparse.Namespace, argv: list[str]) -> int:
         cmd_bench(args, argv)
     elif args.command == "compare":
         cmd_compare(args, argv)
+    elif args.command == "evaluate":
+        cmd_evaluate(args, argv)
+    elif args.command == "leaderboard":
+        cmd_leaderboard(args)
     elif args.command == "score":
         cmd_score(args)
     elif args.command == "play":

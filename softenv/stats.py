@@ -106,6 +106,22 @@ def bootstrap_ci(values: np.ndarray, resamples: int = RESAMPLES, seed: int = 0,
     return interval(float(v.mean()), means, confidence)
 
 
+def nested_interval(scores: np.ndarray, aggregate: Aggregate = mean, resamples: int = RESAMPLES,
+                    confidence: float = CONFIDENCE, seed: int = 0) -> tuple[float, float, float]:
+    """One scene's ``(runs, episodes)`` scores aggregated over every entry, with the interval of a
+    two-level bootstrap: runs (training seeds) drawn with replacement, then episodes within each drawn
+    run, so the interval holds both the spread between seeds and the spread between episodes (with one
+    run it is the bootstrap over episodes)."""
+    m = check_scores(scores)
+    runs, episodes = m.shape
+    rng = np.random.default_rng(seed)
+    picked = rng.integers(0, runs, size=(resamples, runs, 1))
+    columns = rng.integers(0, episodes, size=(resamples, runs, episodes))
+    draws = m[picked, columns]
+    values = draws.reshape(resamples, -1).mean(axis=1) if aggregate is mean else np.array([aggregate(d) for d in draws])
+    return interval(aggregate(m), values, confidence)
+
+
 def performance_profile(scores: np.ndarray, taus: np.ndarray) -> np.ndarray:
     """The share of runs scoring above each ``tau``, averaged over tasks: ``(len(taus),)``."""
     m = check_scores(scores)

@@ -1,0 +1,212 @@
+"""Results anyone can report on softenv, and the check that they were made under the protocol.
+
+A result is one method on one benchmark scene, as a JSON file (``format_version`` 1):
+
+| key | what |
+|---|---|
+| ``format``, ``format_version`` | ``"softenv-result"``, 1 |
+| ``method``, ``kind`` | the method's name; ``baseline``, ``agent`` or ``submission`` |
+| ``scene``, ``scene_hash`` | a benchmark scene (``softenv.evaluation.SCENES``) and the hash of its config |
+| ``protocol``, ``split`` | the protocol's version and ``"test"`` |
+| ``episodes``, ``seeds`` | the number of test episodes and their seeds (the protocol's first ``episodes``) |
+| ``training_seeds`` | one label per run (training seed); ``[]`` for a method that does not train |
+| ``error_sum``, ``normalized_score`` | per run, per episode: the summed shape error and the normalized score |
+| ``anchors`` | the digest of the anchors the scores were scaled by, and their oracle |
+| ``aggregates`` | ``mean``, ``ci_low``, ``ci_high``, ``iqm``, ``iqm_low``, ``iqm_high``, ``per_run`` as reported |
+| ``softenv``, ``command``, ``hardware``, ``date`` | what made it |
+
+:func:`check_result` accepts a file only if every field is there with its type; it is on the test
+split, under this protocol, with the protocol's ``EPISODES`` episodes and seeds; its scene hashes as
+the scene does now; its anchors are the shipped ones; its normalized scores are its error sums scaled
+by those anchors; and its aggregates are what its scores give. Anything else is refused in one line
+that names what differs.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import softenv
+
+from . import stats
+from ._artifact import write_text
+from .baselines.anchors import load_anchors, scene_config, scene_hash
+from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, normalized_scores, test_seeds
+from .bench.timing import machine_info
+from .evaluation import Evaluation
+
+RESULT_FORMAT = "softenv-result"
+RESULT_VERSION = 1
+KINDS = ("baseline", "agent", "submission")
+FIELDS: dict[str, type | tuple[type, ...]] = {
+    "format": str, "format_version": int, "method": str, "kind": str, "scene": str, "scene_hash": str,
+    "protocol": int, "split": str, "episodes": int, "seeds": list, "training_seeds": list, "error_sum": list,
+    "normalized_score": list, "anchors": dict, "aggregates": dict, "softenv": str, "command": str,
+    "hardware": dict, "date": str}
+AGGREGATE_KEYS = ("mean", "ci_low", "ci_high", "iqm", "iqm_low", "iqm_high", "per_run")
+TOLERANCE = 1e-6       # aggregates are recomputed from the scores: as JSON keeps them, to rounding
+
+
+def result_record(evaluation: Evaluation, kind: str = "submission", command: str = "",
+                  training_seeds: list[Any] | None = None) -> dict[str, Any]:
+    """An evaluation as a result file's contents (see the module docstring)."""
+    if kind not in KINDS:
+        raise ValueError(f"kind={kind!r}; choose from {list(KINDS)}")
+    runs = len(evaluation.normalized_score)
+    labels = list(training_seeds) if training_seeds is not None else ([] if runs == 1 else list(range(runs)))
+    if labels and len(labels) != runs:
+        raise ValueError(f"training_seeds has {len(labels)} labels for {runs} runs")
+    summary = evaluation.summary()
+    return {"format": RESULT_FORMAT, "format_version": RESULT_VERSION, "method": evaluation.policy, "kind": kind,
+            "scene": evaluation.scene, "scene_hash": evaluation.scene_hash, "protocol": evaluation.protocol,
+            "split": evaluation.split, "episodes": len(evaluation.seeds), "seeds": list(evaluation.seeds),
+            "training_seeds": labels, "error_sum": evaluation.error_sum.tolist(),
+            "normalized_score": evaluation.normalized_score.tolist(),
+            "anchors": {"digest": evaluation.anchors.digest(), "source": Path(evaluation.anchors.source).name},
+            "aggregates": {key: summary[key] for key in AGGREGATE_KEYS}, "softenv": softenv.__version__,
+            "command": command or f"softenv.evaluation.evaluate_policy({evaluation.policy!r}, {evaluation.scene!r})",
+            "hardware": machine_info(), "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+
+
+def save_result(record: dict[str, Any], path: str | Path) -> Path:
+    """Write a result file (checked first: a file :func:`check_result` would refuse is not written)."""
+    check_result(record)
+    return write_text(path, json.dumps(record, indent=1) + "\n")
+
+
+def read_result(path: str | Path) -> dict[str, Any]:
+    """A result file's contents (``ValueError`` naming the file if it is not JSON)."""
+    try:
+        record = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"result {str(path)!r} is not readable JSON: {exc}") from None
+    if not isinstance(record, dict):
+        raise ValueError(f"result {str(path)!r} holds a {type(record).__name__}, not a JSON object")
+    return record
+
+
+def _matrix(record: dict[str, Any], key: str, runs: int, episodes: int) -> np.ndarray:
+    try:
+        m = np.array(record[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{key} must be a list of runs, each a list of {episodes} numbers") from None
+    if m.shape != (runs, episodes) or not np.isfinite(m).all():
+        raise ValueError(f"{key} has shape {m.shape} (finite: {bool(np.isfinite(m).all())}); expected {runs} run(s) "
+                         f"x {episodes} episodes, all finite")
+    return m
+
+
+def check_result(record: dict[str, Any]) -> dict[str, Any]:
+    """Refuse (``ValueError``, one line naming what differs) a result not made under the protocol, on
+    another scene or other anchors, or whose numbers do not follow from its scores; else return the
+    aggregates recomputed from them."""
+    missing = [key for key in FIELDS if key not in record]
+    if missing:
+        raise ValueError(f"missing fields: {', '.join(missing)}")
+    wrong = [f"{key} ({type(record[key]).__name__}, expected {getattr(kind, '__name__', kind)})"
+             for key, kind in FIELDS.items() if not isinstance(record[key], kind) or isinstance(record[key], bool)]
+    if wrong:
+        raise ValueError(f"fields of the wrong type: {', '.join(wrong)}")
+    if record["format"] != RESULT_FORMAT or record["format_version"] != RESULT_VERSION:
+        raise ValueError(f"format {record['format']!r} version {record['format_version']}; this softenv reads "
+                         f"{RESULT_FORMAT!r} version {RESULT_VERSION}")
+    if record["kind"] not in KINDS:
+        raise ValueError(f"kind {record['kind']!r}; one of {list(KINDS)}")
+    if record["split"] != SPLIT:
+        raise ValueError(f"split {record['split']!r}: results are made on the {SPLIT!r} targets, never the ones "
+                         "agents train on")
+    if record["protocol"] != PROTOCOL_VERSION:
+        raise ValueError(f"protocol version {record['protocol']}; this softenv's is {PROTOCOL_VERSION}")
+    scene = record["scene"]
+    if scene not in SCENES:
+        raise ValueError(f"scene {scene!r} is not a benchmark scene; valid scenes: {list(SCENES)}")
+    expected_hash = scene_hash(scene_config(scene))
+    if record["scene_hash"] != expected_hash:
+        raise ValueError(f"scene_hash {record['scene_hash']!r} is not {scene}'s ({expected_hash!r}): made on "
+                         "another scene config")
+    episodes = record["episodes"]
+    if episodes != EPISODES or record["seeds"] != test_seeds(EPISODES):
+        raise ValueError(f"episodes {episodes} with seeds {_span(record['seeds'])}; the protocol's are {EPISODES} "
+                         f"episodes seeded {_span(test_seeds(EPISODES))}")
+    runs = len(record["normalized_score"])
+    labels = record["training_seeds"]
+    if runs < 1 or (labels and len(labels) != runs) or (not labels and runs != 1):
+        raise ValueError(f"{runs} run(s) of scores for {len(labels)} training_seeds labels; one label per run "
+                         "(none for a single run of a method that does not train)")
+    error_sum = _matrix(record, "error_sum", runs, episodes)
+    scores = _matrix(record, "normalized_score", runs, episodes)
+    anchors = load_anchors(scene, test_seeds(EPISODES), echo=lambda line: None)
+    if record["anchors"].get("digest") != anchors.digest():
+        raise ValueError(f"anchors digest {record['anchors'].get('digest')!r} is not {scene}'s shipped anchors' "
+                         f"({anchors.digest()!r}): scaled by another scene's or another oracle's anchors")
+    rescaled = normalized_scores(error_sum, anchors.zero, anchors.oracle)
+    off = np.abs(rescaled - scores) > TOLERANCE * np.maximum(1.0, np.abs(rescaled))
+    if off.any():
+        run, episode = map(int, np.argwhere(off)[0])
+        raise ValueError(f"normalized_score of run {run}, episode {episode} is {scores[run, episode]!r}; its error sum "
+                         f"with the shipped anchors gives {rescaled[run, episode]!r} ({int(off.sum())} such entries)")
+    recomputed = aggregates(scores)
+    reported = record["aggregates"]
+    for key in AGGREGATE_KEYS:
+        if key not in reported:
+            raise ValueError(f"aggregates lack {key!r}")
+        if not _close(reported[key], recomputed[key]):
+            raise ValueError(f"aggregates[{key!r}] = {reported[key]!r}, but the scores give {recomputed[key]!r}")
+    return recomputed
+
+
+def aggregates(scores: np.ndarray) -> dict[str, Any]:
+    """What a result reports of its ``(runs, episodes)`` scores (the same code as an evaluation's summary)."""
+    mean, low, high = stats.nested_interval(scores)
+    iqm, iqm_low, iqm_high = stats.nested_interval(scores, stats.iqm)
+    return {"mean": mean, "ci_low": low, "ci_high": high, "iqm": iqm, "iqm_low": iqm_low, "iqm_high": iqm_high,
+            "per_run": [float(v) for v in scores.mean(axis=1)]}
+
+
+def _close(a: Any, b: Any) -> bool:
+    if isinstance(b, list):
+        return isinstance(a, list) and len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b))
+    return isinstance(a, (int, float)) and not isinstance(a, bool) and math.isclose(a, b, rel_tol=TOLERANCE,
+                                                                                     abs_tol=TOLERANCE)
+
+
+def _span(seeds: Any) -> str:
+    if not isinstance(seeds, list) or not seeds:
+        return repr(seeds)
+    return f"{seeds[0]}..{seeds[-1]}" if len(seeds) > 2 else repr(seeds)
+
+
+def load_results(folder: str | Path) -> list[dict[str, Any]]:
+    """Every result file in ``folder`` (``*.json``), each checked (a refused one raises, naming it)."""
+    out = []
+    for path in sorted(Path(folder).glob("*.json")):
+        record = read_result(path)
+        try:
+            check_result(record)
+        except ValueError as exc:
+            raise ValueError(f"{path.name}: {exc}") from None
+        out.append(record)
+    return out
+
+
+def table(records: list[dict[str, Any]], highlight: str | None = None) -> str:
+    """A Markdown leaderboard: per scene, the methods by mean normalized score, with their intervals."""
+    lines = []
+    for scene in [s for s in SCENES if any(r["scene"] == s for r in records)]:
+        rows = sorted((r for r in records if r["scene"] == scene), key=lambda r: -r["aggregates"]["mean"])
+        lines += [f"### {scene}", "", "| rank | method | kind | normalized score [95 % CI] | IQM [95 % CI] | runs | by run |",
+                  "|---|---|---|---|---|---|---|"]
+        for rank, r in enumerate(rows, 1):
+            a = r["aggregates"]
+            name = f"**{r['method']}**" if r["method"] == highlight else r["method"]
+            by_run = ", ".join(f"{v:.1f}" for v in a["per_run"]) if len(a["per_run"]) > 1 else ""
+            lines.append(f"| {rank} | {name} | {r['kind']} | {a['mean']:.1f} [{a['ci_low']:.1f}, {a['ci_high']:.1f}] | "
+                         f"{a['iqm']:.1f} [{a['iqm_low']:.1f}, {a['iqm_high']:.1f}] | {len(a['per_run'])} | {by_run} |")
+        lines.append("")
+    return "\n".join(lines)
