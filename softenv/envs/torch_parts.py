@@ -75,10 +75,14 @@ class HostEpisodes:
         self.arrays: dict[str, torch.Tensor] = {}
         self.rows = torch.arange(num_envs, device=tensor(0.0).device)
 
-    def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
-        self.rngs, episodes = seeded_episodes(self.world, self.rngs, seed, options)
-        self.arrays = {name: self.tensor(getattr(episodes, name), sum_dtype(name, None))
-                       for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
+    def reset(self, seed: Any, options: dict[str, Any] | None, mask: np.ndarray | None = None) -> None:
+        """Every env's next episode, or the ``mask``ed envs' (``reset(options={"reset_mask": ...})``)."""
+        self.rngs, episodes = seeded_episodes(self.world, self.rngs, seed, options, mask)
+        if mask is None:
+            self.arrays = {name: self.tensor(getattr(episodes, name), sum_dtype(name, None))
+                           for name in ("target_b", "sq_ref", "zero_cum", "oracle_cum")}
+        else:
+            self._write(np.flatnonzero(mask).tolist(), episodes)
 
     def references(self, t: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """This step's target shape, its reference (squared), and the zero and oracle error sums so far."""
@@ -100,11 +104,13 @@ class HostEpisodes:
         idx = mask.nonzero()[:, 0].tolist()
         if not idx:
             return False
-        new = self.world.start_episodes([self.rngs[i] for i in idx])
+        self._write(idx, self.world.start_episodes([self.rngs[i] for i in idx]))
+        return True
+
+    def _write(self, idx: list[int], new: Any) -> None:
         rows = torch.as_tensor(idx, device=self.rows.device)
         for name, value in self.arrays.items():
             value[rows] = self.tensor(getattr(new, name), value.dtype)
-        return True
 
 
 class DeviceEpisodes:
@@ -134,7 +140,8 @@ class DeviceEpisodes:
 
     # -- episode starts -----------------------------------------------------------------------------
 
-    def reset(self, seed: Any, options: dict[str, Any] | None) -> None:
+    def reset(self, seed: Any, options: dict[str, Any] | None, mask: np.ndarray | None = None) -> None:
+        """Every env's next episode, or the ``mask``ed envs' (``reset(options={"reset_mask": ...})``)."""
         n = len(self.seed)
         target = target_option(self.world, options)            # everything is checked before the state changes
         seeds: list[Any] = check_seeds(seed, n)
@@ -144,15 +151,15 @@ class DeviceEpisodes:
             base = entropy % (1 << 63)
             seeds = [base + i if s is None else s for i, s in enumerate(seeds)]
         device = self.seed.device
-        fresh = torch.tensor([s is not None for s in seeds], device=device)
+        chosen = torch.ones(n, dtype=torch.bool, device=device) if mask is None else torch.as_tensor(mask, device=device)
+        fresh = torch.tensor([s is not None for s in seeds], device=device) & chosen
         given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=device)
         keep(fresh, given, self.seed)
-        torch.where(fresh, torch.zeros_like(self.episode), self.episode + 1, out=self.episode)
+        torch.where(fresh, torch.zeros_like(self.episode), self.episode + chosen.to(torch.int64), out=self.episode)
         self.seeded = True
-        everyone = torch.ones(n, dtype=torch.bool, device=device)
         features = self.draw() if target is None else self.tensor(np.broadcast_to(target, (n, 4)))
-        self.features.copy_(features)
-        self._begin(everyone)
+        keep(chosen[:, None], features.to(self.features.dtype), self.features)
+        self._begin(chosen)
 
     def draw(self) -> torch.Tensor:
         """Each env's target for its current episode number, ``(N, 4)`` float64."""

@@ -43,7 +43,7 @@ from gymnasium.vector.utils import batch_space
 from ..devices.base import DeviceTensors
 from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
-from .batching import check_actions, episode_limit
+from .batching import check_actions, disabled_step_check, episode_limit, reset_mask_option
 from .config import scene_config
 from .task import reward_terms
 from .torch_graph import GraphedStep
@@ -81,7 +81,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
     ``info["final_obs"]`` holds every env's last observation (rows where ``info["_final_obs"]``) and
-    ``info["final_info"]`` the ended episodes' infos.
+    ``info["final_info"]`` the ended episodes' infos; with ``"disabled"``, ``reset(options={"reset_mask":
+    mask})`` (a numpy or torch bool mask) resets the masked envs, as the numpy twin's does.
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -144,6 +145,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._agent_cum, self._peak = t(np.zeros(n), sum_dtype("agent_cum", dtype)), t(np.zeros(n))
         self._last_target = t(np.empty((n, k)))
         self._autoreset = torch.zeros(n, dtype=torch.bool, device=self.torch_device)
+        self._last_obs: Any = None            # what step() or reset() returned last (autoreset_mode="disabled")
         self._started = False
         self._clock = 0                 # steps since reset(): on the host, for _episodes_may_start
         # the tensor work of a step, compiled when compile_options asks, recorded when cuda_graph asks
@@ -170,17 +172,29 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        self._episodes.reset(seed, options)
-        self._started, self._clock = True, 0
-        everyone = torch.ones(self.num_envs, dtype=torch.bool, device=self.torch_device)
-        self._start(everyone)
-        self._autoreset[:] = False
-        return self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev), {}
+        mask, options = reset_mask_option(options, self.num_envs, self.autoreset_mode)
+        if mask is not None and not self._started:
+            raise RuntimeError("call reset() without a reset_mask first: there are no episodes to go on from")
+        self._episodes.reset(seed, options, mask)
+        chosen = torch.ones(self.num_envs, dtype=torch.bool, device=self.torch_device) if mask is None \
+            else torch.as_tensor(mask, device=self.torch_device)
+        if mask is None:
+            self._started, self._clock = True, 0
+        self._start(chosen)
+        self._autoreset &= ~chosen
+        obs = self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev)
+        if mask is not None:                     # the others' observations are those their last step returned
+            obs = _where_rows(chosen, obs, self._last_obs)
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            self._last_obs = _clone(obs)
+        return obs, {}
 
     def step(self, actions: Any) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
         a = self._checked(actions)
+        if self.autoreset_mode == AutoresetMode.DISABLED:       # a host read of the flags: this mode's price
+            disabled_step_check(self._autoreset.cpu().numpy())
         self._clock += 1
         return self._tensor_work(a, self._episodes_may_start())
 
@@ -194,12 +208,18 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             obs, reward, terminated, truncated, values = self._advance(a, torch.ones_like(self._autoreset))
             done = terminated | truncated
             _add_masked(infos, values, ~done)
-            final_obs = {key: v.clone() for key, v in obs.items()} if isinstance(obs, dict) else obs.clone()
+            final_obs = _clone(obs)
             final_info: dict[str, Any] = {}
             _add_masked(final_info, values, done)
             infos.update({"final_obs": final_obs, "_final_obs": done.clone(), "final_info": final_info,
                           "_final_info": done.clone()})
             return self._restart_rows(obs, done, may_start), reward, terminated, truncated, infos
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            obs, reward, terminated, truncated, values = self._advance(a, torch.ones_like(self._autoreset))
+            _add_masked(infos, values, torch.ones_like(self._autoreset))
+            self._autoreset.copy_(terminated | truncated)
+            self._last_obs = _clone(obs)
+            return obs, reward, terminated, truncated, infos
         reset_now = self._autoreset.clone()
         obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
         obs = self._restart_rows(obs, reset_now, may_start)
@@ -327,6 +347,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         """Whether an env can start an episode this step. Without success termination every episode lasts
         ``max_episode_steps`` and all began at reset(), so the host knows those steps (no read of the flags):
         one in ``max_episode_steps`` steps (same-step autoreset) or one more (next-step: the step after the end)."""
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            return False                  # the caller starts episodes, through reset()
         if self.world.terminate_on_success:
             return True
         period = self.max_episode_steps + (self.autoreset_mode == AutoresetMode.NEXT_STEP)
@@ -337,10 +359,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not may_start or not self._episodes.restart(mask):
             return obs
         self._start(mask)
-        fresh = self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev)
-        if isinstance(obs, dict):
-            return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
-        return torch.where(mask[:, None], fresh, obs)
+        return _where_rows(mask, self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev), obs)
 
 
 DEVICE_CALLS = ("reset", "act", "observation", "report")     # what a step calls of its device
@@ -365,6 +384,17 @@ def usable_device(value: Any) -> torch.device:
         raise ValueError(f"torch_device={value!r} is not a torch device usable here ({gpu}; use 'cpu' or a "
                          f"'cuda:i' that exists): {exc}") from None
     return device
+
+
+def _where_rows(mask: torch.Tensor, fresh: Any, obs: Any) -> Any:
+    """``fresh``'s rows where ``mask``, ``obs``'s elsewhere (observations: a tensor or a dict of them)."""
+    if isinstance(obs, dict):
+        return {key: torch.where(mask[:, None], fresh[key], value) for key, value in obs.items()}
+    return torch.where(mask[:, None], fresh, obs)
+
+
+def _clone(obs: Any) -> Any:
+    return {key: value.clone() for key, value in obs.items()} if isinstance(obs, dict) else obs.clone()
 
 
 def _add_masked(infos: dict[str, Any], values: dict[str, torch.Tensor], mask: torch.Tensor) -> None:

@@ -11,7 +11,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .._ops import ArrayOps
-from .batching import add_masked, check_actions, episode_limit, obs_row, seeded_episodes
+from .batching import (add_masked, check_actions, disabled_step_check, episode_limit, obs_copy, obs_row, reset_mask_option,
+                       seeded_episodes)
 from .batching import autoreset_mode as autoreset_mode_of
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
@@ -32,7 +33,10 @@ class SoftSphereVectorEnv(VectorEnv):
     ``gym.make(..., max_episode_steps=m)`` puts on the single env; the task keeps its horizon).
     ``autoreset_mode``: ``"next_step"`` (Gymnasium's default: the step after an episode ends resets
     that env and ignores its action) or ``"same_step"`` (reset at once; ``info["final_obs"]`` and
-    ``info["final_info"]`` hold the last observation and info, as SB3 needs). Infos are dicts of
+    ``info["final_info"]`` hold the last observation and info, as SB3 needs) or ``"disabled"`` (an ended
+    env is not reset: the caller resets it with ``reset(options={"reset_mask": mask})``, which resets the
+    masked envs only, seeds as ``reset`` does, and returns every env's observation; stepping an ended env
+    first is refused). Infos are dicts of
     arrays with ``_key`` masks, as :class:`gymnasium.vector.SyncVectorEnv` makes them.
     """
 
@@ -66,6 +70,7 @@ class SoftSphereVectorEnv(VectorEnv):
         self._peak = np.zeros(n)
         self._last_target = np.empty((n, k))
         self._autoreset = np.zeros(n, dtype=bool)
+        self._last_obs: Any = None            # what step() or reset() returned last (autoreset_mode="disabled")
         self._episode: Any = None            # the episodes' arrays (world.Episodes) once reset() ran
         # the step's large temporaries, reused (see TableWork: fresh ones can cost a page fault a page)
         self._response_work = self.world.response_work(n)
@@ -75,10 +80,21 @@ class SoftSphereVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        self._rngs, self._episode = seeded_episodes(self.world, self._rngs, seed, options)
-        self._start(np.ones(self.num_envs, dtype=bool))
-        self._autoreset[:] = False
-        return self._observe(self._b, self._upcoming_target(), self._device_obs(), self._prev), {}
+        mask, options = reset_mask_option(options, self.num_envs, self.autoreset_mode)
+        if mask is None:
+            self._rngs, self._episode = seeded_episodes(self.world, self._rngs, seed, options)
+            self._start(np.ones(self.num_envs, dtype=bool))
+            obs = self._observe(self._b, self._upcoming_target(), self._device_obs(), self._prev)
+        else:
+            if self._episode is None:
+                raise RuntimeError("call reset() without a reset_mask first: there are no episodes to go on from")
+            self._rngs, new = seeded_episodes(self.world, self._rngs, seed, options, mask)
+            self._restart(mask, new)
+            obs = self._write_rows(obs_copy(self._last_obs), mask)
+        self._autoreset[mask if mask is not None else slice(None)] = False
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            self._last_obs = obs_copy(obs)
+        return obs, {}
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         infos: dict[str, Any] = {}
@@ -93,6 +109,12 @@ class SoftSphereVectorEnv(VectorEnv):
                               "_final_info": done.copy()})
             return obs, reward, terminated, truncated, infos
         a = self._checked(actions)
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            disabled_step_check(self._autoreset)
+            obs, reward, terminated, truncated, values = self._advance(a, np.ones(self.num_envs, dtype=bool))
+            add_masked(infos, values, np.ones(self.num_envs, dtype=bool))
+            self._autoreset, self._last_obs = terminated | truncated, obs_copy(obs)
+            return obs, reward, terminated, truncated, infos
         reset_now = self._autoreset.copy()
         obs, reward, terminated, truncated, values = self._advance(a, ~reset_now)
         if reset_now.any():               # next-step autoreset: these envs ignored their action and restart now
@@ -226,10 +248,10 @@ class SoftSphereVectorEnv(VectorEnv):
         self._peak[mask] = 0.0
         self._last_target[mask] = self._episode.target_b[mask, 0]
 
-    def _restart(self, mask: np.ndarray) -> None:
-        """Draw new episodes for the masked envs (from their own generators) and reset their state."""
+    def _restart(self, mask: np.ndarray, new: Any = None) -> None:
+        """Start the masked envs' episodes ``new`` (default: drawn from their own generators) and reset their state."""
         idx = np.flatnonzero(mask)
-        new = self.world.start_episodes([self._rngs[i] for i in idx])
+        new = self.world.start_episodes([self._rngs[i] for i in idx]) if new is None else new
         ep = self._episode
         for name in ("target_features", "target_b", "sq_ref", "zero_cum", "oracle_cum"):
             getattr(ep, name)[idx] = getattr(new, name)
