@@ -39,7 +39,7 @@ from softenv._cache import cache_dir
 from softenv.envs.config import config_key, make_config
 from softenv.envs.world import World
 
-from .evaluate import PROTOCOL_VERSION, Episodes, evaluate, scene_kwargs, test_seeds
+from .evaluate import PROTOCOL_VERSION, Episodes, evaluate, scene_kwargs, episode_seeds
 from .planner import TrajectoryOracle
 from .policies import PlanningOracle, ZeroPolicy, make_baseline
 
@@ -94,7 +94,7 @@ def anchor_job(scene: str, episodes: int, oracle_settings: dict[str, Any]
     """The anchors of the first ``episodes`` test episodes for ``softenv compare``: the shipped ones
     when ``oracle_settings`` are the shipped oracle's (or empty), else computed under those settings
     (then, on the laryngoscope, the oracle's own episodes are returned too: the table's oracle row)."""
-    seeds = test_seeds(episodes)
+    seeds = episode_seeds(episodes)
     if not oracle_settings or oracle_settings == oracle_of(scene)["settings"]:
         anchors = load_anchors(scene, seeds, echo=lambda line: None)
         return anchors.zero, anchors.oracle, None
@@ -166,7 +166,7 @@ def load_anchors(scene: str, seeds: list[int] | None = None,
     (and cached), with one line to ``echo`` (default: standard error) saying what was computed and why.
     A damaged shipped file is refused; a damaged cache entry is computed again."""
     say = echo if echo is not None else (lambda line: print(line, file=sys.stderr))
-    seeds = test_seeds() if seeds is None else [int(s) for s in seeds]
+    seeds = episode_seeds() if seeds is None else [int(s) for s in seeds]
     shipped_path, cached_path = anchors_file(scene), _cached_file(scene)
     shipped, why = read_anchors(shipped_path, scene) if shipped_path.exists() else ({}, f"none ships for {scene}")
     try:

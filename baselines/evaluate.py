@@ -41,7 +41,7 @@ SCENES: dict[str, tuple[str, dict[str, Any]]] = {
 }
 
 
-def test_seeds(episodes: int = EPISODES) -> list[int]:
+def episode_seeds(episodes: int = EPISODES) -> list[int]:
     """The seeds of the protocol's first ``episodes`` test episodes."""
     return [FIRST_SEED + i for i in range(episodes)]
 

@@ -1,8 +1,10 @@
 """Make the shipped anchors: for every benchmark scene, each test episode's summed shape error under no
 force (the score's 0) and under the planning oracle (its 100), into ``softenv/baselines/shipped_anchors/``
 (package data; the format is :mod:`softenv.baselines.anchors`'). Run it from a clean commit: each file
-names the commit and this command. About 10 minutes on 2 cores, nearly all of it the laryngoscope
-oracle's search (16 candidates x 30 iterations per episode).
+names the commit and this command. It runs with one BLAS thread and an empty cache of its own, as the
+tests and ``softenv compare`` do (a scene's shape model built with other BLAS threads differs in the last
+bits). About 5 minutes on 2 cores, nearly all of it the laryngoscope oracle's search (16 candidates x
+30 iterations per episode).
 
     python scripts/make_anchors.py [--scenes SCENE ...] [--episodes 100] [--jobs 2]
 """
@@ -11,25 +13,33 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 from softenv._artifact import write_text
 from softenv.baselines.anchors import anchors_file, anchors_record, compute_anchors
-from softenv.baselines.evaluate import EPISODES, SCENES, test_seeds
+from softenv.baselines.evaluate import EPISODES, SCENES, episode_seeds
+from softenv.bench import single_thread_environment, threads_pinned
 from softenv.bench.timing import code_revision
 from softenv.parallel import Job, run_jobs, usable_cores
 
 
 def main() -> None:
+    if not threads_pinned() or "SOFTENV_ANCHORS_CACHE" not in os.environ:
+        cache = tempfile.mkdtemp(prefix="softenv-anchors-")
+        env = {**single_thread_environment(), "SOFTENV_CACHE_DIR": cache, "SOFTENV_ANCHORS_CACHE": cache}
+        os.execve(sys.executable, [sys.executable, *sys.argv], env)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", choices=list(SCENES), default=list(SCENES))
     parser.add_argument("--episodes", type=int, default=EPISODES)
     parser.add_argument("--jobs", type=int, default=usable_cores())
     parser.add_argument("--out", type=Path, default=None, help="another folder (default: the package's own)")
     args = parser.parse_args()
-    seeds = test_seeds(args.episodes)
+    seeds = episode_seeds(args.episodes)
     made_by = {"command": "python scripts/make_anchors.py " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
                "commit": code_revision()}
     # the longest first (the laryngoscope's searches), so the workers finish together
@@ -42,6 +52,7 @@ def main() -> None:
         path = anchors_file(scene) if args.out is None else args.out / anchors_file(scene).name
         write_text(path, json.dumps(anchors_record(scene, seeds, zero, oracle, made_by), indent=1) + "\n")
         print(f"wrote {path} ({result.wall_s:.0f} s)")
+    shutil.rmtree(os.environ["SOFTENV_ANCHORS_CACHE"], ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ import numpy as np
 from . import stats
 from .baselines.anchors import Anchors, load_anchors, scene_hash, scene_config
 from .baselines.evaluate import CLINICAL, EPISODES, METRICS, PROTOCOL_VERSION, SCENES, SPLIT, evaluate, \
-    normalized_scores, test_seeds
+    normalized_scores, episode_seeds
 from .baselines.policies import CallablePolicy, SB3Policy
 
 __all__ = ["Evaluation", "SCENES", "aggregate", "as_policy", "evaluate_policy"]
@@ -114,7 +114,7 @@ def evaluate_policy(policy: Any, scene: str = "SoftSphere-v0", episodes: int = E
     runs = list(policy) if isinstance(policy, (list, tuple)) else [policy]
     if not runs:
         raise ValueError("policy=[]: give at least one policy (one per training seed)")
-    seeds = test_seeds(int(episodes))
+    seeds = episode_seeds(int(episodes))
     anchors = load_anchors(scene, seeds, echo if echo is not None else (lambda line: print(line, file=sys.stderr)))
     done = [evaluate(as_policy(p, name), scene, len(seeds), seeds) for p in runs]
     names = {e.policy for e in done}

@@ -37,7 +37,7 @@ import softenv
 from . import stats
 from ._artifact import write_text
 from .baselines.anchors import load_anchors, scene_config, scene_hash
-from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, normalized_scores, test_seeds
+from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, normalized_scores, episode_seeds
 from .bench.timing import machine_info
 from .evaluation import Evaluation
 
@@ -131,9 +131,9 @@ def check_result(record: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"scene_hash {record['scene_hash']!r} is not {scene}'s ({expected_hash!r}): made on "
                          "another scene config")
     episodes = record["episodes"]
-    if episodes != EPISODES or record["seeds"] != test_seeds(EPISODES):
+    if episodes != EPISODES or record["seeds"] != episode_seeds(EPISODES):
         raise ValueError(f"episodes {episodes} with seeds {_span(record['seeds'])}; the protocol's are {EPISODES} "
-                         f"episodes seeded {_span(test_seeds(EPISODES))}")
+                         f"episodes seeded {_span(episode_seeds(EPISODES))}")
     runs = len(record["normalized_score"])
     labels = record["training_seeds"]
     if runs < 1 or (labels and len(labels) != runs) or (not labels and runs != 1):
@@ -141,7 +141,7 @@ def check_result(record: dict[str, Any]) -> dict[str, Any]:
                          "(none for a single run of a method that does not train)")
     error_sum = _matrix(record, "error_sum", runs, episodes)
     scores = _matrix(record, "normalized_score", runs, episodes)
-    anchors = load_anchors(scene, test_seeds(EPISODES), echo=lambda line: None)
+    anchors = load_anchors(scene, episode_seeds(EPISODES), echo=lambda line: None)
     if record["anchors"].get("digest") != anchors.digest():
         raise ValueError(f"anchors digest {record['anchors'].get('digest')!r} is not {scene}'s shipped anchors' "
                          f"({anchors.digest()!r}): scaled by another scene's or another oracle's anchors")

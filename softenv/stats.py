@@ -10,7 +10,8 @@ that one method improves on another (the Mann-Whitney statistic, averaged over t
 is archived (October 2025), so softenv owns this code; the tests hold it to the package's numbers.
 
 Everything here is numpy only. Point estimates equal ``rliable``'s definitions: IQM is
-``scipy.stats.trim_mean(scores, 0.25)`` over all entries, the optimality gap is
+``scipy.stats.trim_mean(scores, 0.25)`` over all entries, the median is that of the tasks' means, the
+optimality gap is
 ``gamma - mean(min(scores, gamma))`` (``gamma`` = 100, the planning oracle), the performance profile
 counts scores strictly above ``tau``.
 """
@@ -44,8 +45,9 @@ def mean(values: np.ndarray) -> float:
 
 
 def median(values: np.ndarray) -> float:
+    """The median over tasks of each task's mean over runs (``rliable``'s), of a ``(runs, tasks)`` matrix."""
     v = np.asarray(values, dtype=np.float64)
-    return float(np.median(v)) if v.size else float("nan")
+    return float(np.median(v.reshape(len(v), -1).mean(axis=0))) if v.size else float("nan")
 
 
 def optimality_gap(values: np.ndarray, gamma: float = ORACLE_SCORE) -> float:
