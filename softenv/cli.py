@@ -183,7 +183,8 @@ def cmd_score(args: argparse.Namespace) -> None:
     if args.scene is not None or args.law is not None:
         scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"}}
     path = example_log(args.example) if args.example else Path(args.trajectory)
-    report = score_file(path, scene, args.out)
+    typed = " ".join(f"--{name} {value}" for name, value in (("scene", args.scene), ("law", args.law)) if value)
+    report = score_file(path, scene, args.out, scene_named=typed or None)
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
     parts = ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"])

@@ -1,6 +1,7 @@
 """Trainee scoring: schema validation, replay physics, the score's ordering on the shipped examples."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from softenv.cli import main
 from softenv.envs import make_config
 from softenv.training.logs import EXAMPLES_DIR, FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
 from softenv.training.scoring import (ADVICE, COLUMNS, expert_trajectory, improvements, load_trajectory,
@@ -253,9 +255,33 @@ def test_a_log_records_its_scene_and_is_replayed_on_it(expert_log, tmp_path):
     assert report["score"] == score_hand_log(table, STIFF)[0]["score"] != score_hand_log(table)[0]["score"]
     same = {"tissue": {"law": "stiffening", "E": make_config()["tissue"]["E"]}}     # the same config, spelt out
     assert score_file(path, scene=same)["score"] == report["score"]
-    with pytest.raises(ValueError, match=r"was recorded on scene \{'tissue': \{'law': 'stiffening'\}\}; scene=\{\} is "
-                                         "another scene"):
+    with pytest.raises(ValueError, match=r"was recorded on scene \{'tissue': \{'law': 'stiffening'\}\}; scene=\{\} asks "
+                                         "for another scene"):
         score_file(path, scene={})
+
+
+def test_a_scene_of_another_device_is_refused_by_device_kind(expert_log, tmp_path, capsys):
+    """A hand-pose log needs the laryngoscope: a scene naming the ideal device, given by the caller or
+    recorded in the log, is refused in one line naming device.kind (it raised AttributeError inside)."""
+    ideal = {"device": {"kind": "ideal"}}
+    why = "device.kind='ideal': a hand-pose log moves the laryngoscope, so replaying and scoring it needs device.kind='laryngoscope'"
+    with pytest.raises(ValueError, match=re.escape(why)):
+        score_hand_log(expert_log, scene=ideal)
+    path = tmp_path / "ideal.csv"
+    save_log(expert_log, path, HAND_LOG, scene=ideal)
+    with pytest.raises(ValueError, match="the scene it records is not valid here: " + re.escape(why)):
+        score_file(path)
+    assert main(["score", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and why in err[0]
+
+
+def test_the_command_line_names_the_options_a_contradiction_comes_from(expert_log, tmp_path, capsys):
+    path = tmp_path / "stiff.csv"
+    save_log(expert_log, path, HAND_LOG, scene=STIFF)
+    assert main(["score", str(path), "--law", "linear", "--scene", "viscoelastic"]) == 2
+    err = capsys.readouterr().err
+    assert "; --scene viscoelastic --law linear asks for another scene (omit it" in err and "scene={" not in err
 
 
 def test_old_logs_without_a_scene_replay_on_the_named_scene(expert_log, tmp_path):

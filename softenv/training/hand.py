@@ -21,12 +21,19 @@ from .logs import HAND_LOG, MAX_GAP_S, check_limits, check_table
 
 
 def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
-    """SoftSphereHaptic-v0's config with ``scene``'s sections merged in."""
-    return scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene")
+    """SoftSphereHaptic-v0's config with ``scene``'s sections merged in; a scene of another device is refused
+    (a hand moves the laryngoscope: hand logs, play and their scoring need it)."""
+    config = scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene")
+    kind = config["device"]["kind"]
+    if kind != "laryngoscope":
+        raise ValueError(f"device.kind={kind!r}: a hand-pose log moves the laryngoscope, so replaying and scoring "
+                         "it needs device.kind='laryngoscope' (a force-command log is the ideal device's)")
+    return config
 
 
 def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
     """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
+    haptic_config(scene)                              # the laryngoscope's scene, or a refusal naming device.kind
     scene = scene_sections(scene)
     scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
     return SoftSphereEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)

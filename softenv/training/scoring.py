@@ -275,9 +275,11 @@ def log_config(schema: Schema, scene: dict[str, Any] | None) -> dict[str, dict[s
     return haptic_config(scene) if schema is HAND_LOG else make_config(**scene_sections(scene))
 
 
-def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None) -> tuple[dict[str, Any], str]:
+def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None,
+             named: str | None = None) -> tuple[dict[str, Any], str]:
     """The scene a log is replayed on, and where it came from: the one it records (a ``scene`` that
-    makes another config is refused by name, never silently used), else ``scene``, else the id's own."""
+    makes another config is refused, named as the caller gave it: ``named``, else ``scene={...}``, never
+    silently used), else ``scene``, else the id's own."""
     source = f"trajectory {str(path)!r}"
     recorded = read_scene(path)
     if recorded is None:
@@ -287,21 +289,23 @@ def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None) -> 
     except ValueError as exc:
         raise ValueError(f"{source}: the scene it records is not valid here: {exc}") from None
     if scene is not None and log_config(schema, scene) != config:
-        raise ValueError(f"{source} was recorded on scene {recorded}; scene={scene} is another scene (omit it to "
-                         "replay the log on its own)")
+        raise ValueError(f"{source} was recorded on scene {recorded}; {named or f'scene={scene}'} asks for another scene "
+                         "(omit it to replay the log on its own)")
     return recorded, "the log"
 
 
-def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
+def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None,
+               scene_named: str | None = None) -> dict[str, Any]:
     """Score a log file (hand poses or force commands, by its columns) on the scene it records (a log of
     ``format_version`` 2), else on ``scene`` (None: the id's own); a ``scene`` that contradicts the
-    recorded one is refused. With ``out_dir``, write ``<name>_score.json``, ``.md`` and ``.png``.
+    recorded one is refused (by ``scene_named``, how the caller named it, if given). With ``out_dir``, write
+    ``<name>_score.json``, ``.md`` and ``.png``.
     Arguments and file are checked before any replay."""
     if out_dir is not None:
         check_out_dir(out_dir, "out directory")
     source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
-    scene, scene_from = scene_of(path, schema, scene)
+    scene, scene_from = scene_of(path, schema, scene, scene_named)
     config = log_config(schema, scene)
     safe_force = config["reward"]["safe_force"]
     if schema is HAND_LOG:
