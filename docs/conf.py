@@ -1,6 +1,8 @@
 """Sphinx configuration: MyST pages, the furo theme, and pages generated from the code at each build
-(one per env id from the env class's docstring and the id's scene, and the settings table from the
-config schema), written to ``docs/_generated`` (ignored by git) so they never drift from the code."""
+(one per env id from the env class's docstring and the id's scene, the settings table from the
+config schema, and the leaderboard from ``results/leaderboard/*.json``, each file checked as
+``softenv leaderboard check`` checks it), written to ``docs/_generated`` (ignored by git) so they never
+drift from the code or the results."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ sys.path.insert(0, str(DOCS.parent))
 import gymnasium as gym  # noqa: E402
 
 import softenv  # noqa: E402
+from softenv import leaderboard  # noqa: E402
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES  # noqa: E402
 from softenv.envs.single import SoftSphereEnv  # noqa: E402
 
@@ -51,9 +54,19 @@ API = {
                                             "softenv.training.bridge.BridgeClient"],
     "Fan-out": ["softenv.parallel.run_jobs", "softenv.parallel.Job", "softenv.parallel.Interrupted",
                 "softenv.parallel.stop_on_signals"],
+    "Evaluation and the leaderboard": ["softenv.evaluation.evaluate_policy", "softenv.evaluation.Evaluation",
+                                       "softenv.evaluation.aggregate", "softenv.evaluation.as_policy",
+                                       "softenv.leaderboard.result_record", "softenv.leaderboard.save_result",
+                                       "softenv.leaderboard.read_result", "softenv.leaderboard.check_result",
+                                       "softenv.leaderboard.load_results", "softenv.leaderboard.table",
+                                       "softenv.baselines.anchors.load_anchors"],
+    "Statistics": ["softenv.stats.iqm", "softenv.stats.optimality_gap", "softenv.stats.interval_estimates",
+                   "softenv.stats.nested_interval", "softenv.stats.performance_profile",
+                   "softenv.stats.profile_intervals", "softenv.stats.probability_of_improvement",
+                   "softenv.stats.improvement_interval"],
     "Baselines and agents": ["softenv.baselines.agents.train_agent", "softenv.baselines.agents.load_agent",
                              "softenv.baselines.evaluate.evaluate", "softenv.baselines.evaluate.normalized_scores",
-                             "softenv.baselines.anchors.anchor_job", "softenv.baselines.benchmark.run"],
+                             "softenv.baselines.benchmark.run"],
 }
 
 
@@ -119,6 +132,18 @@ def env_page(env_id: str, scene: dict) -> str:
         "```", ""])
 
 
+def leaderboard_page() -> str:
+    records = leaderboard.load_results(DOCS.parent / "results" / "leaderboard")
+    return "\n".join([
+        "# Leaderboard\n",
+        "Every result file under `results/leaderboard/`, checked as `softenv leaderboard check` checks it (protocol, "
+        "scene, shipped anchors, aggregates recomputed from the per-episode scores) and tabled at each docs build, "
+        "best mean first. Normalized score: 0 = no force, 100 = the planning oracle; mean [95 % interval] of every "
+        "episode of every run (training seed), the interval a two-level bootstrap over runs and their episodes; "
+        "IQM likewise. How to add one: [report a result](../tutorials/report-a-result.md).\n",
+        leaderboard.table(records)])
+
+
 def generate() -> None:
     out = DOCS / "_generated"
     (out / "envs").mkdir(parents=True, exist_ok=True)
@@ -128,6 +153,7 @@ def generate() -> None:
     (out / "env_class.inc").write_text(markdown(SoftSphereEnv.__doc__ or "") + "\n")
     (out / "settings_table.inc").write_text(softenv.describe_config() + "\n")
     (out / "api.md").write_text(api_page())
+    (out / "leaderboard.md").write_text(leaderboard_page())
 
 
 generate()

@@ -14,6 +14,7 @@ A result is one method on one benchmark scene, as a JSON file (``format_version`
 | ``anchors`` | the digest of the anchors the scores were scaled by, and their oracle |
 | ``aggregates`` | ``mean``, ``ci_low``, ``ci_high``, ``iqm``, ``iqm_low``, ``iqm_high``, ``per_run`` as reported |
 | ``softenv``, ``command``, ``hardware``, ``date`` | what made it |
+| ``notes`` (optional) | a line for the reader (an agent's budget, say) |
 
 :func:`check_result` accepts a file only if every field is there with its type; it is on the test
 split, under this protocol, with the protocol's ``EPISODES`` episodes and seeds; its scene hashes as
@@ -200,13 +201,14 @@ def table(records: list[dict[str, Any]], highlight: str | None = None) -> str:
     lines = []
     for scene in [s for s in SCENES if any(r["scene"] == s for r in records)]:
         rows = sorted((r for r in records if r["scene"] == scene), key=lambda r: -r["aggregates"]["mean"])
-        lines += [f"### {scene}", "", "| rank | method | kind | normalized score [95 % CI] | IQM [95 % CI] | runs | by run |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += [f"### {scene}", "", "| rank | method | kind | normalized score [95 % CI] | IQM [95 % CI] | runs | by run | notes |",
+                  "|---|---|---|---|---|---|---|---|"]
         for rank, r in enumerate(rows, 1):
             a = r["aggregates"]
             name = f"**{r['method']}**" if r["method"] == highlight else r["method"]
             by_run = ", ".join(f"{v:.1f}" for v in a["per_run"]) if len(a["per_run"]) > 1 else ""
             lines.append(f"| {rank} | {name} | {r['kind']} | {a['mean']:.1f} [{a['ci_low']:.1f}, {a['ci_high']:.1f}] | "
-                         f"{a['iqm']:.1f} [{a['iqm_low']:.1f}, {a['iqm_high']:.1f}] | {len(a['per_run'])} | {by_run} |")
+                         f"{a['iqm']:.1f} [{a['iqm_low']:.1f}, {a['iqm_high']:.1f}] | {len(a['per_run'])} | {by_run} | "
+                         f"{r.get('notes', '')} |")
         lines.append("")
     return "\n".join(lines)

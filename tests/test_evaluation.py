@@ -9,7 +9,7 @@ import pytest
 from softenv import stats
 from softenv.baselines import anchors as anchors_module
 from softenv.baselines.anchors import compute_anchors, load_anchors, read_anchors, scene_config
-from softenv.baselines.evaluate import SCENES, evaluate, normalized_scores, test_seeds
+from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate, normalized_scores
 from softenv.baselines.policies import RandomPolicy, SB3Policy, ZeroPolicy
 from softenv.envs.world import World
 from softenv.evaluation import Evaluation, aggregate, evaluate_policy
@@ -76,7 +76,7 @@ def test_a_callable_an_object_and_runs(haptic_world):
     assert np.array_equal(as_callable.error_sum, evaluate_policy(zero, "SoftSphereHaptic-v0", 8).error_sum)
     runs = evaluate_policy([RandomPolicy(haptic_world, s) for s in (0, 1)], "SoftSphereHaptic-v0", 8, name="random")
     assert runs.normalized_score.shape == (2, 8) and runs.policy == "random"
-    anchors = load_anchors("SoftSphereHaptic-v0", test_seeds(8))
+    anchors = load_anchors("SoftSphereHaptic-v0", episode_seeds(8))
     np.testing.assert_array_equal(runs.normalized_score, normalized_scores(runs.error_sum, anchors.zero, anchors.oracle))
     assert runs.score == stats.nested_interval(runs.normalized_score)
     assert runs.per_run == pytest.approx(list(runs.normalized_score.mean(axis=1)))

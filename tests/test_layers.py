@@ -3,6 +3,7 @@ functions included), and an import inside a function is only there to keep an op
 of the processes that do not need it, saying so in a comment."""
 
 import ast
+import re
 import os
 import shutil
 import subprocess
@@ -109,3 +110,19 @@ def test_the_import_rule_catches_what_it_should(bad, tmp_path):
     node = next(n for n in ast.walk(tree) if isinstance(n, (ast.Import, ast.ImportFrom)))
     targets = absolute(node, "softenv.tissue", False)
     assert not all(reaches_optional(t, sources(), set()) for t in targets)
+
+
+def test_nothing_imports_the_top_level_name_baselines():
+    """The baselines are softenv.baselines: in a checkout the folder is importable as `baselines` too, and
+    one module under two names would be two modules (and a name that collides with OpenAI Baselines')."""
+    offenders = []
+    tracked = subprocess.run(["git", "ls-files", "*.py", "*.md"], cwd=ROOT, capture_output=True, text=True, check=True)
+    history = ("results/", "CHANGELOG.md", "tests/test_layers.py")     # records of commands as they were run
+    for path in (ROOT / name for name in tracked.stdout.splitlines() if not name.startswith(history)):
+        if not path.is_file() or path.is_symlink():
+            continue
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            if re.search(r"^\s*(from|import) baselines\b|python -m baselines\b", line):
+                offenders.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)
+    assert (ROOT / "softenv" / "baselines").resolve() == (ROOT / "baselines").resolve()

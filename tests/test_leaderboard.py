@@ -1,0 +1,149 @@
+"""Leaderboard results: a file round-trips through check; tampered ones are refused, each in one line that
+names what differs; softenv evaluate and softenv leaderboard on the command line."""
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from softenv import leaderboard
+from softenv.baselines.anchors import scene_config
+from softenv.baselines.policies import RandomPolicy
+from softenv.cli import main
+from softenv.envs.world import World
+from softenv.evaluation import evaluate_policy
+
+
+@pytest.fixture(scope="module")
+def record() -> dict:
+    world = World(scene_config("SoftSphere-v0"))
+    result = evaluate_policy([RandomPolicy(world, s) for s in (0, 1)], "SoftSphere-v0", name="random")
+    return leaderboard.result_record(result, "baseline", "pytest", training_seeds=[0, 1])
+
+
+def test_a_result_round_trips_through_check(record, tmp_path):
+    path = leaderboard.save_result(record, tmp_path / "random.json")
+    again = leaderboard.read_result(path)
+    assert again == json.loads(json.dumps(record))
+    got = leaderboard.check_result(again)
+    assert got["mean"] == pytest.approx(record["aggregates"]["mean"], rel=1e-12)
+    assert len(again["normalized_score"]) == 2 and len(again["normalized_score"][0]) == 100
+    assert {"cpu", "numpy"} <= set(again["hardware"])
+    assert leaderboard.load_results(tmp_path) == [again]
+
+
+def tampered(record: dict, **changes) -> dict:
+    out = json.loads(json.dumps(record))
+    for key, value in changes.items():
+        if value is None:
+            del out[key]
+        else:
+            out[key] = value
+    return out
+
+
+def _scores_off(record: dict) -> dict:
+    out = json.loads(json.dumps(record))
+    out["normalized_score"][1][7] += 5.0
+    return out
+
+
+def _aggregate_off(record: dict) -> dict:
+    out = json.loads(json.dumps(record))
+    for run in out["normalized_score"]:         # scores and error sums consistent, the aggregate not
+        run[3] += 0.0
+    out["aggregates"]["iqm"] += 1.0
+    return out
+
+
+def _other_scene(record: dict) -> dict:
+    """The scene renamed: its hash is the linear scene's, not the stiffening scene's."""
+    return tampered(record, scene="SoftSphere-v0/stiffening")
+
+
+def _other_anchors(record: dict) -> dict:
+    """Scores rescaled by other anchors, and consistent with them: the digest gives it away."""
+    out = tampered(record, anchors={"digest": "0123456789abcdef", "source": "mine.json"})
+    return out
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda r: tampered(r, split="train"), "split 'train': results are made on the 'test' targets"),
+    (_other_scene, "scene_hash '[0-9a-f]+' is not SoftSphere-v0/stiffening's .*another scene config"),
+    (lambda r: tampered(r, scene_hash="ffffffffffffffff"), "scene_hash 'ffffffffffffffff' is not SoftSphere-v0's"),
+    (_other_anchors, "anchors digest '0123456789abcdef' is not SoftSphere-v0's shipped anchors'"),
+    (_scores_off, "normalized_score of run 1, episode 7 is .*; its error sum with the shipped anchors gives"),
+    (_aggregate_off, r"aggregates\['iqm'\] = .*, but the scores give"),
+    (lambda r: tampered(r, hardware=None, command=None), "missing fields: command, hardware"),
+    (lambda r: tampered(r, episodes=50), "episodes 50 with seeds 1000..1099; the protocol's are 100 episodes"),
+    (lambda r: tampered(r, seeds=list(range(2000, 2100))), "seeds 2000..2099; the protocol's are 100 episodes seeded 1000..1099"),
+    (lambda r: tampered(r, protocol=0), "protocol version 0; this softenv's is 1"),
+    (lambda r: tampered(r, format_version=9), "format 'softenv-result' version 9"),
+    (lambda r: tampered(r, episodes="100"), r"fields of the wrong type: episodes \(str, expected int\)"),
+    (lambda r: tampered(r, training_seeds=[0]), "2 run\\(s\\) of scores for 1 training_seeds labels"),
+    (lambda r: tampered(r, error_sum=[[1.0] * 100]), r"error_sum has shape \(1, 100\)"),
+    (lambda r: tampered(r, scene="SoftCube-v0"), "scene 'SoftCube-v0' is not a benchmark scene"),
+])
+def test_tampered_results_are_refused_in_one_line(record, make, match):
+    with pytest.raises(ValueError, match=match) as refused:
+        leaderboard.check_result(make(record))
+    assert "\n" not in str(refused.value)
+
+
+def test_a_refused_result_is_not_written(record, tmp_path):
+    with pytest.raises(ValueError, match="split"):
+        leaderboard.save_result(tampered(record, split="train"), tmp_path / "x.json")
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_the_table_ranks_by_mean(record):
+    better = json.loads(json.dumps(record))
+    better["method"] = "better"
+    better["aggregates"]["mean"] = 99.0
+    text = leaderboard.table([record, better], highlight="random")
+    assert text.index("| 1 | better |") < text.index("| 2 | **random** |")
+
+
+POLICY = """import numpy as np
+
+def policy(obs):
+    return np.zeros((len(obs), 4), np.float32)
+"""
+
+
+def test_the_command_line_evaluates_checks_and_shows(tmp_path, monkeypatch, capsys):
+    (tmp_path / "my_policy.py").write_text(POLICY)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    assert main(["evaluate", "my_policy:policy", "--scene", "SoftSphere-v0", "--out", "mine.json"]) == 0
+    out = capsys.readouterr().out
+    assert "my_policy:policy on SoftSphere-v0: normalized score" in out and "wrote mine.json" in out
+    assert main(["leaderboard", "check", "mine.json"]) == 0
+    assert "mine.json: ok" in capsys.readouterr().out
+    assert main(["leaderboard", "show", "mine.json", "--dir", str(tmp_path / "none")]) == 0
+    assert "| 1 | **my_policy:policy** | submission |" in capsys.readouterr().out
+    bad = json.loads((tmp_path / "mine.json").read_text())
+    bad["split"] = "train"
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    assert main(["leaderboard", "check", "mine.json", "bad.json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["softenv leaderboard: error: bad.json: split 'train': results are made on the 'test' targets, "
+                   "never the ones agents train on"]
+    for argv, match in [(["evaluate", "my_policy:nothing"], "my_policy has no attribute 'nothing'"),
+                        (["evaluate", "no_such_module:policy"], "module 'no_such_module' does not import"),
+                        (["evaluate", "my_policy"], "must be MODULE:ATTRIBUTE"),
+                        (["evaluate", "my_policy:policy", "--episodes", "5", "--out", "x.json"], "takes the protocol's 100")]:
+        assert main(argv) == 2
+        assert match in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_the_shipped_leaderboard_checks():
+    """Every result under results/leaderboard passes check (the docs page is built from them)."""
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "results" / "leaderboard"
+    records = leaderboard.load_results(folder)
+    assert {r["scene"] for r in records} >= {"SoftSphere-v0", "SoftSphereHaptic-v0"}
+    assert all(np.isfinite(r["aggregates"]["mean"]) for r in records)
