@@ -141,6 +141,13 @@ def leaderboard_page() -> str:
         "best mean first. Normalized score: 0 = no force, 100 = the planning oracle; mean [95 % interval] of every "
         "episode of every run (training seed), the interval a two-level bootstrap over runs and their episodes; "
         "IQM likewise. How to add one: [report a result](../tutorials/report-a-result.md).\n",
+        "## Across scenes\n",
+        "Each method on every scene of a device, as `rliable` aggregates runs x scenes (each run's mean score on each "
+        "scene): IQM, mean and optimality gap (the shortfall from 100) with stratified-bootstrap 95 % intervals, and "
+        "the probability that the top method scores above each other one on a scene (`softenv leaderboard aggregate`; "
+        "methods without a result on every scene of the device are left out).\n",
+        leaderboard.aggregates_table(records),
+        "## By scene\n",
         leaderboard.table(records)])
 
 

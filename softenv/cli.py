@@ -225,26 +225,30 @@ def cmd_evaluate(args: argparse.Namespace, argv: list[str]) -> None:
         print(printable(f"wrote {leaderboard.save_result(record, args.out)} (softenv leaderboard check passes it)"))
 
 
+def checked_result(path: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A result file and the aggregates its scores give; a refusal names the file."""
+    record = leaderboard.read_result(path)               # names the file itself
+    try:
+        return record, leaderboard.check_result(record)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
 def cmd_leaderboard(args: argparse.Namespace) -> None:
     if args.action == "check":
         for path in args.files:
-            try:
-                got = leaderboard.check_result(leaderboard.read_result(path))
-            except ValueError as exc:
-                raise ValueError(f"{path}: {exc}") from None
+            got = checked_result(path)[1]
             print(printable(f"{path}: ok ({got['mean']:.1f} [{got['ci_low']:.1f}, {got['ci_high']:.1f}])"))
         return
     records = leaderboard.load_results(args.dir) if Path(args.dir).is_dir() else []
-    mine = []
-    for path in args.files:
-        record = leaderboard.read_result(path)
-        try:
-            leaderboard.check_result(record)
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
-        mine.append(record)
+    mine = [checked_result(path)[0] for path in args.files]
     if not records and not mine:
         raise ValueError(f"no results to show: {args.dir!r} holds none and no FILE was given")
+    if args.action == "aggregate":
+        print(leaderboard.aggregates_table(records + mine))
+        if args.plot:
+            print(printable(f"wrote {leaderboard.aggregates_figure(records + mine, args.plot)}"))
+        return
     print(leaderboard.table(records + mine, highlight=mine[0]["method"] if len(mine) == 1 else None))
 
 
@@ -408,9 +412,14 @@ def build_parser() -> argparse.ArgumentParser:
     actions = p.add_subparsers(dest="action", required=True)
     q = actions.add_parser("check", help="validate result files: schema, protocol, scene, anchors, aggregates")
     q.add_argument("files", nargs="+", metavar="FILE")
-    q = actions.add_parser("show", help="the leaderboard of a folder of results, with FILEs among them")
-    q.add_argument("files", nargs="*", metavar="FILE")
-    q.add_argument("--dir", default="results/leaderboard", help="the folder of results (default: results/leaderboard)")
+    for action, text in (("show", "the leaderboard of a folder of results, with FILEs among them"),
+                         ("aggregate", "each method across the scenes of a device (IQM, mean, optimality gap, "
+                                       "probability of improvement; stratified bootstrap)")):
+        q = actions.add_parser(action, help=text)
+        q.add_argument("files", nargs="*", metavar="FILE")
+        q.add_argument("--dir", default="results/leaderboard", help="the folder of results (default: results/leaderboard)")
+        if action == "aggregate":
+            q.add_argument("--plot", help="also draw the aggregates and performance profiles into this PNG")
 
     p = sub.add_parser("score", help="score a recorded trainee log (CSV or NPZ) against the expert")
     log = p.add_mutually_exclusive_group(required=True)

@@ -36,9 +36,9 @@ import numpy as np
 import softenv
 
 from . import stats
-from ._artifact import write_text
+from ._artifact import save_figure, write_text
 from .baselines.anchors import load_anchors, scene_config, scene_hash
-from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, normalized_scores, episode_seeds
+from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, device_kind, episode_seeds, normalized_scores
 from .bench.timing import machine_info
 from .evaluation import Evaluation
 
@@ -212,3 +212,98 @@ def table(records: list[dict[str, Any]], highlight: str | None = None) -> str:
                          f"{r.get('notes', '')} |")
         lines.append("")
     return "\n".join(lines)
+
+
+# -- across scenes (rliable's aggregates) ----------------------------------------------------------------
+
+def scene_groups() -> dict[str, list[str]]:
+    """The benchmark's scenes by device: methods are compared across the scenes of one device."""
+    groups: dict[str, list[str]] = {}
+    for scene in SCENES:
+        groups.setdefault(device_kind(scene), []).append(scene)
+    return groups
+
+
+def across_scenes(records: list[dict[str, Any]], scenes: list[str]) -> dict[str, list[np.ndarray]]:
+    """Each method with a result on every one of ``scenes``, with the same number of runs on each: per
+    scene its ``(runs, episodes)`` normalized scores (:func:`softenv.stats.with_resamples`' input: runs
+    and the episodes within them resampled within each scene)."""
+    by_method: dict[str, dict[str, list[list[float]]]] = {}
+    for r in records:
+        if r["scene"] in scenes:
+            by_method.setdefault(r["method"], {})[r["scene"]] = r["normalized_score"]
+    out = {}
+    for method, runs in by_method.items():
+        if set(runs) == set(scenes) and len({len(v) for v in runs.values()}) == 1:
+            out[method] = [np.array(runs[s], dtype=np.float64) for s in scenes]
+    return out
+
+
+def aggregates_table(records: list[dict[str, Any]], resamples: int = stats.RESAMPLES) -> str:
+    """Markdown: per device, every method with results on all its scenes, by IQM across scenes (of each
+    run's mean score on each scene), with the mean, the optimality gap (each with its stratified-bootstrap
+    95 % interval: runs, then their episodes, resampled within each scene) and the probability that the
+    top method improves on it (with its interval)."""
+    lines = []
+    for device, scenes in scene_groups().items():
+        matrices = across_scenes(records, scenes)
+        if not matrices:
+            continue
+        estimates = {m: stats.interval_estimates(x, resamples=resamples) for m, x in matrices.items()}
+        ranked = sorted(matrices, key=lambda m: -estimates[m]["iqm"][0])
+        top = ranked[0]
+        lines += [f"### {device}: {len(scenes)} scene(s) ({', '.join(scenes)})", "",
+                  f"| method | runs | IQM [95 % CI] | mean [95 % CI] | optimality gap [95 % CI] | P({top} > method) [95 % CI] |",
+                  "|---|---|---|---|---|---|"]
+        for m in ranked:
+            e = estimates[m]
+            cells = [f"{e[k][0]:.1f} [{e[k][1]:.1f}, {e[k][2]:.1f}]" for k in ("iqm", "mean", "optimality_gap")]
+            poi = "" if m == top else "{:.2f} [{:.2f}, {:.2f}]".format(
+                *stats.improvement_interval(matrices[top], matrices[m], resamples=resamples))
+            lines.append(f"| {m} | {len(matrices[m][0])} | {' | '.join(cells)} | {poi} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def aggregates_figure(records: list[dict[str, Any]], path: str | Path, resamples: int = stats.RESAMPLES) -> Path:
+    """Per device, a row of two panels: each method's IQM and optimality gap across scenes with their
+    stratified-bootstrap 95 % intervals, and the performance profiles (the share of runs and scenes above
+    each score) with pointwise 95 % bands. Methods on fewer than all of a device's scenes are left out."""
+    import matplotlib                                        # the viz extra
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt                          # the viz extra
+
+    groups = {d: (scenes, across_scenes(records, scenes)) for d, scenes in scene_groups().items()}
+    groups = {d: g for d, g in groups.items() if g[1]}
+    if not groups:
+        raise ValueError("no method has results on every scene of a device: nothing to aggregate")
+    fig, axes = plt.subplots(len(groups), 3, figsize=(15, 4.2 * len(groups)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 1.3]})
+    taus = np.linspace(0.0, 105.0, 106)
+    for row, (device, (scenes, matrices)) in zip(axes, groups.items()):
+        estimates = {m: stats.interval_estimates(x, resamples=resamples) for m, x in matrices.items()}
+        ranked = sorted(matrices, key=lambda m: estimates[m]["iqm"][0])
+        for ax, key, label in ((row[0], "iqm", "IQM of normalized score"), (row[1], "optimality_gap", "optimality gap")):
+            point = np.array([estimates[m][key][0] for m in ranked])
+            low = np.array([estimates[m][key][1] for m in ranked])
+            high = np.array([estimates[m][key][2] for m in ranked])
+            ax.errorbar(point, np.arange(len(ranked)), xerr=[point - low, high - point], fmt="o", color="#333333",
+                        ecolor="#8a8a8a", capsize=3)
+            ax.set_yticks(np.arange(len(ranked)), ranked, fontsize=8)
+            ax.set_xlabel(f"{label} (bars: 95 % stratified-bootstrap interval)", fontsize=8)
+            ax.grid(axis="x", alpha=0.3)
+        row[0].set_title(f"{device}: across {len(scenes)} scene(s)", fontsize=10, loc="left")
+        for m in ranked[::-1]:
+            profile, low, high = stats.profile_intervals(matrices[m], taus, resamples=resamples)
+            (line,) = row[2].plot(taus, profile, label=m, lw=1.2)
+            row[2].fill_between(taus, low, high, color=line.get_color(), alpha=0.15, lw=0)
+        row[2].set_xlabel("normalized score tau (0 = no force, 100 = the planning oracle)", fontsize=8)
+        row[2].set_ylabel("share of runs x scenes above tau", fontsize=8)
+        row[2].legend(fontsize=6, ncol=2, loc="lower left")
+        row[2].set_title("performance profiles (bands: 95 % pointwise)", fontsize=10, loc="left")
+    fig.tight_layout()
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

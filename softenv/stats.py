@@ -86,14 +86,40 @@ def interval(point: float, draws: np.ndarray, confidence: float = CONFIDENCE) ->
     return point, float(np.percentile(draws, tail)), float(np.percentile(draws, 100 - tail))
 
 
-def interval_estimates(scores: np.ndarray, aggregates: dict[str, Aggregate] | None = None,
+def with_resamples(scores: np.ndarray | list[np.ndarray], resamples: int = RESAMPLES,
+                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(runs, tasks)`` matrix of run means and its stratified bootstrap draws ``(resamples, runs, tasks)``.
+    ``scores`` is that matrix (runs resampled within each task), or per task a ``(runs, episodes)`` array of
+    per-episode scores, the same number of runs on each (runs resampled within each task, then episodes
+    within each drawn run: the interval then holds the spread between episodes too, which a method with
+    one run, a deterministic baseline, has and a matrix of its one run mean cannot show)."""
+    if not isinstance(scores, list):
+        m = check_scores(scores)
+        return m, stratified_resamples(m, resamples, seed)
+    tasks = [check_scores(t, f"scores[{i}]") for i, t in enumerate(scores)]
+    if not tasks or len({len(t) for t in tasks}) != 1:
+        raise ValueError(f"scores must give every task the same number of runs; got {[len(t) for t in tasks]}")
+    rng = np.random.default_rng(seed)
+    draws = np.stack([nested_draws(t, resamples, rng).mean(axis=-1) for t in tasks], axis=-1)
+    return np.stack([t.mean(axis=1) for t in tasks], axis=1), draws
+
+
+def nested_draws(scores: np.ndarray, resamples: int, rng: np.random.Generator) -> np.ndarray:
+    """``(resamples, runs, episodes)``: a ``(runs, episodes)`` array's runs drawn with replacement, then
+    episodes with replacement within each drawn run."""
+    runs, episodes = scores.shape
+    picked = rng.integers(0, runs, size=(resamples, runs, 1))
+    return scores[picked, rng.integers(0, episodes, size=(resamples, runs, episodes))]
+
+
+def interval_estimates(scores: np.ndarray | list[np.ndarray], aggregates: dict[str, Aggregate] | None = None,
                        resamples: int = RESAMPLES, confidence: float = CONFIDENCE,
                        seed: int = 0) -> dict[str, tuple[float, float, float]]:
-    """Each aggregate of a ``(runs, tasks)`` matrix with its stratified-bootstrap interval:
-    ``{"iqm": (point, low, high), ...}`` (default: IQM, mean, median, optimality gap)."""
-    m = check_scores(scores)
+    """Each aggregate of a ``(runs, tasks)`` matrix (or of per-task ``(runs, episodes)`` scores: see
+    :func:`with_resamples`) with its stratified-bootstrap interval: ``{"iqm": (point, low, high), ...}``
+    (default: IQM, mean, median, optimality gap)."""
+    m, draws = with_resamples(scores, resamples, seed)
     aggregates = AGGREGATES if aggregates is None else aggregates
-    draws = stratified_resamples(m, resamples, seed)
     return {name: interval(fn(m), np.array([fn(d) for d in draws]), confidence) for name, fn in aggregates.items()}
 
 
@@ -115,11 +141,7 @@ def nested_interval(scores: np.ndarray, aggregate: Aggregate = mean, resamples: 
     run, so the interval holds both the spread between seeds and the spread between episodes (with one
     run it is the bootstrap over episodes)."""
     m = check_scores(scores)
-    runs, episodes = m.shape
-    rng = np.random.default_rng(seed)
-    picked = rng.integers(0, runs, size=(resamples, runs, 1))
-    columns = rng.integers(0, episodes, size=(resamples, runs, episodes))
-    draws = m[picked, columns]
+    draws = nested_draws(m, resamples, np.random.default_rng(seed))
     values = draws.reshape(resamples, -1).mean(axis=1) if aggregate is mean else np.array([aggregate(d) for d in draws])
     return interval(aggregate(m), values, confidence)
 
@@ -130,11 +152,12 @@ def performance_profile(scores: np.ndarray, taus: np.ndarray) -> np.ndarray:
     return (m[None] > np.asarray(taus, dtype=np.float64)[:, None, None]).mean(axis=1).mean(axis=1)
 
 
-def profile_intervals(scores: np.ndarray, taus: np.ndarray, resamples: int = RESAMPLES,
+def profile_intervals(scores: np.ndarray | list[np.ndarray], taus: np.ndarray, resamples: int = RESAMPLES,
                       confidence: float = CONFIDENCE, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The performance profile and its pointwise stratified-bootstrap interval: ``(profile, low, high)``."""
-    m = check_scores(scores)
-    draws = np.array([performance_profile(d, taus) for d in stratified_resamples(m, resamples, seed)])
+    """The performance profile and its pointwise stratified-bootstrap interval: ``(profile, low, high)``
+    (``scores`` as :func:`with_resamples` takes them)."""
+    m, resampled = with_resamples(scores, resamples, seed)
+    draws = np.array([performance_profile(d, taus) for d in resampled])
     tail = 100 * (1 - confidence) / 2
     return performance_profile(m, taus), np.percentile(draws, tail, axis=0), np.percentile(draws, 100 - tail, axis=0)
 
@@ -150,11 +173,12 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
     return float((greater + 0.5 * ties).mean())
 
 
-def improvement_interval(x: np.ndarray, y: np.ndarray, resamples: int = RESAMPLES, confidence: float = CONFIDENCE,
+def improvement_interval(x: np.ndarray | list[np.ndarray], y: np.ndarray | list[np.ndarray],
+                         resamples: int = RESAMPLES, confidence: float = CONFIDENCE,
                          seed: int = 0) -> tuple[float, float, float]:
-    """:func:`probability_of_improvement` with its interval, each method's runs resampled within each task."""
-    mx, my = check_scores(x, "x"), check_scores(y, "y")
+    """:func:`probability_of_improvement` with its interval, each method resampled within each task
+    (``x`` and ``y`` as :func:`with_resamples` takes them)."""
+    mx, draws_x = with_resamples(x, resamples, seed)
+    my, draws_y = with_resamples(y, resamples, seed + 1)
     point = probability_of_improvement(mx, my)
-    draws_x = stratified_resamples(mx, resamples, seed)
-    draws_y = stratified_resamples(my, resamples, seed + 1)
     return interval(point, np.array([probability_of_improvement(a, b) for a, b in zip(draws_x, draws_y)]), confidence)

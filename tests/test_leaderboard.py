@@ -147,3 +147,40 @@ def test_the_shipped_leaderboard_checks():
     records = leaderboard.load_results(folder)
     assert {r["scene"] for r in records} >= {"SoftSphere-v0", "SoftSphereHaptic-v0"}
     assert all(np.isfinite(r["aggregates"]["mean"]) for r in records)
+
+
+def synthetic(scenes: list[str]) -> list[dict]:
+    """Two methods on every scene, two runs of five episodes each: a's runs at 80 + i and 90 + i (plus 0-4)
+    on scene i, b's at 70 + i and 60 + i."""
+    def runs(levels: tuple[float, float], i: int) -> list[list[float]]:
+        return [[level + i + e for e in range(5)] for level in levels]
+    return [{"scene": scene, "method": method, "normalized_score": runs(levels, i)}
+            for i, scene in enumerate(scenes) for method, levels in (("a", (80.0, 90.0)), ("b", (70.0, 60.0)))]
+
+
+def test_across_scenes_gives_each_method_its_scores_by_scene_and_the_table_their_intervals(record):
+    """Methods are compared across the scenes of one device, each by its (runs, episodes) scores on every
+    scene; a method missing a scene, or with another number of runs on one, is left out."""
+    from softenv import stats
+
+    scenes = leaderboard.scene_groups()["ideal"]
+    records = synthetic(scenes)
+    records.append({"scene": scenes[0], "method": "partial", "normalized_score": [[99.0] * 5]})
+    scores = leaderboard.across_scenes(records, scenes)
+    assert set(scores) == {"a", "b"}
+    np.testing.assert_array_equal(scores["a"][2], [[82.0, 83, 84, 85, 86], [92.0, 93, 94, 95, 96]])
+    text = leaderboard.aggregates_table(records, resamples=500)
+    iqm = stats.interval_estimates(scores["a"], resamples=500)["iqm"]
+    assert iqm[1] < iqm[0] < iqm[2]               # the episodes' spread shows, though each run is one number
+    assert f"| a | 2 | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] |" in text
+    assert "P(a > method)" in text and "| b | 2 |" in text and "1.00 [1.00, 1.00] |" in text   # a beats b everywhere
+    assert "partial" not in text
+
+
+def test_the_aggregates_figure_is_drawn(record, tmp_path):
+    pytest.importorskip("matplotlib")
+    records = synthetic(leaderboard.scene_groups()["laryngoscope"]) + [record]
+    path = leaderboard.aggregates_figure(records, tmp_path / "aggregates.png", resamples=200)
+    assert path.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="no method has results on every scene"):
+        leaderboard.aggregates_figure([], tmp_path / "none.png")

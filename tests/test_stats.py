@@ -85,3 +85,20 @@ def test_bad_scores_are_refused_by_name():
         stats.check_scores(np.zeros((2, 2, 2)))
     with pytest.raises(ValueError, match="same tasks"):
         stats.probability_of_improvement(np.zeros((2, 3)), np.zeros((2, 2)))
+
+
+def test_per_episode_scores_give_a_method_of_one_run_its_episodes_spread():
+    """Per task (runs, episodes) scores: the matrix is the run means, the interval resamples runs then
+    episodes; one run on one task is the bootstrap of its episodes' mean."""
+    rng = np.random.default_rng(5)
+    one = rng.normal(90, 4, (1, 100))
+    matrix, draws = stats.with_resamples([one, one + 1.0], resamples=3000)
+    np.testing.assert_allclose(matrix, [[one.mean(), one.mean() + 1.0]])
+    assert draws.shape == (3000, 1, 2)
+    point, lo, hi = stats.interval_estimates([one], resamples=3000)["mean"]
+    reference = stats.bootstrap_ci(one[0], resamples=3000)
+    assert point == pytest.approx(reference[0], rel=1e-12)
+    assert lo == pytest.approx(reference[1], abs=0.1 * (reference[2] - reference[1]))
+    assert hi == pytest.approx(reference[2], abs=0.1 * (reference[2] - reference[1]))
+    with pytest.raises(ValueError, match="same number of runs"):
+        stats.with_resamples([np.zeros((2, 3)), np.zeros((1, 3))])
