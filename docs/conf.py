@@ -147,6 +147,10 @@ def leaderboard_page() -> str:
         "the probability that the top method scores above each other one on a scene (`softenv leaderboard aggregate`; "
         "methods without a result on every scene of the device are left out).\n",
         leaderboard.aggregates_table(records),
+        "![IQM and optimality gap across each device's scenes, and performance profiles of episode scores]"
+        "(../../results/leaderboard_aggregates.png)\n",
+        "The figure: `softenv leaderboard aggregate --plot results/leaderboard_aggregates.png` over the same files "
+        "(when it was last made: [every result](../results.md)).\n",
         "## By scene\n",
         leaderboard.table(records)])
 

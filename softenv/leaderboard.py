@@ -266,9 +266,10 @@ def aggregates_table(records: list[dict[str, Any]], resamples: int = stats.RESAM
 
 
 def aggregates_figure(records: list[dict[str, Any]], path: str | Path, resamples: int = stats.RESAMPLES) -> Path:
-    """Per device, a row of two panels: each method's IQM and optimality gap across scenes with their
-    stratified-bootstrap 95 % intervals, and the performance profiles (the share of runs and scenes above
-    each score) with pointwise 95 % bands. Methods on fewer than all of a device's scenes are left out."""
+    """Per device, a row of three panels: each method's IQM and optimality gap across scenes (of its runs'
+    mean scores) with their stratified-bootstrap 95 % intervals, and its performance profile over episode
+    scores (the share of every run's episodes above each score, averaged over scenes; pointwise 95 % bands,
+    episodes resampled within each scene). Methods on fewer than all of a device's scenes are left out."""
     import matplotlib                                        # the viz extra
 
     matplotlib.use("Agg")
@@ -280,7 +281,7 @@ def aggregates_figure(records: list[dict[str, Any]], path: str | Path, resamples
         raise ValueError("no method has results on every scene of a device: nothing to aggregate")
     fig, axes = plt.subplots(len(groups), 3, figsize=(15, 4.2 * len(groups)), squeeze=False,
                              gridspec_kw={"width_ratios": [1, 1, 1.3]})
-    taus = np.linspace(0.0, 105.0, 106)
+    taus = np.arange(1.0, 106.0)          # from 1: a score of 0 with rounding noise is not "above 0"
     for row, (device, (scenes, matrices)) in zip(axes, groups.items()):
         estimates = {m: stats.interval_estimates(x, resamples=resamples) for m, x in matrices.items()}
         ranked = sorted(matrices, key=lambda m: estimates[m]["iqm"][0])
@@ -294,14 +295,19 @@ def aggregates_figure(records: list[dict[str, Any]], path: str | Path, resamples
             ax.set_xlabel(f"{label} (bars: 95 % stratified-bootstrap interval)", fontsize=8)
             ax.grid(axis="x", alpha=0.3)
         row[0].set_title(f"{device}: across {len(scenes)} scene(s)", fontsize=10, loc="left")
-        for m in ranked[::-1]:
-            profile, low, high = stats.profile_intervals(matrices[m], taus, resamples=resamples)
-            (line,) = row[2].plot(taus, profile, label=m, lw=1.2)
-            row[2].fill_between(taus, low, high, color=line.get_color(), alpha=0.15, lw=0)
+        colours = plt.get_cmap("tab20")(np.linspace(0.0, 1.0, 20))
+        for i, m in enumerate(ranked[::-1]):
+            # every episode of every run, per scene: a method of one run still has a distribution
+            episodes = np.stack([scores.ravel() for scores in matrices[m]], axis=1)
+            profile, low, high = stats.profile_intervals(episodes, taus, resamples=resamples)
+            row[2].plot(taus, profile, label=m, lw=1.3, color=colours[(2 * i) % 20 + (2 * i) // 20 % 2],
+                        ls=("-", "--", ":")[i % 3])
+            row[2].fill_between(taus, low, high, color=colours[(2 * i) % 20 + (2 * i) // 20 % 2], alpha=0.15, lw=0)
         row[2].set_xlabel("normalized score tau (0 = no force, 100 = the planning oracle)", fontsize=8)
-        row[2].set_ylabel("share of runs x scenes above tau", fontsize=8)
+        row[2].set_ylabel("share of episodes above tau (mean over scenes)", fontsize=8)
         row[2].legend(fontsize=6, ncol=2, loc="lower left")
-        row[2].set_title("performance profiles (bands: 95 % pointwise)", fontsize=10, loc="left")
+        row[2].set_title("performance profiles of episode scores (bands: 95 %, episodes resampled)", fontsize=9,
+                         loc="left")
     fig.tight_layout()
     try:
         return save_figure(fig, path, dpi=110)
