@@ -24,6 +24,7 @@ Anchor file (``format_version`` 1), JSON:
 from __future__ import annotations
 
 import hashlib
+import inspect
 import json
 import sys
 from dataclasses import dataclass
@@ -47,11 +48,13 @@ ANCHORS_FORMAT = "softenv-anchors"
 ANCHORS_VERSION = 1
 # what the error sums depend on: not the reward's weights, nor rendering
 ANCHOR_SECTIONS = ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task")
-# the oracle the 100 stands for; bump its version when its search changes (every shipped file is re-made)
-ORACLE: dict[str, dict[str, Any]] = {"ideal": {"name": "PlanningOracle", "version": 1, "settings": {}},
-          "laryngoscope": {"name": "TrajectoryOracle", "version": 2,      # 2: one generator per episode
-                           "settings": {"candidates": 16, "iterations": 30, "elites": 4, "knot_every": 25,
-                                        "sigma": 0.15, "seed": 0}}}
+# the oracle the 100 stands for on each device: its class's version and default search (a shipped file of
+# another version or search is not used)
+ORACLE: dict[str, dict[str, Any]] = {
+    "ideal": {"name": "PlanningOracle", "version": PlanningOracle.VERSION, "settings": {}},
+    "laryngoscope": {"name": "TrajectoryOracle", "version": TrajectoryOracle.VERSION,
+                     "settings": {name: p.default for name, p in inspect.signature(TrajectoryOracle).parameters.items()
+                                  if p.default is not inspect.Parameter.empty}}}
 SHIPPED = Path(str(files(__package__ or "softenv.baselines") / "shipped_anchors"))
 
 
@@ -92,14 +95,16 @@ def oracle_of(scene: str) -> dict[str, Any]:
 def anchor_job(scene: str, episodes: int, oracle_settings: dict[str, Any]
                ) -> tuple[np.ndarray, np.ndarray, Episodes | None]:
     """The anchors of the first ``episodes`` test episodes for ``softenv compare``: the shipped ones
-    when ``oracle_settings`` are the shipped oracle's (or empty), else computed under those settings
-    (then, on the laryngoscope, the oracle's own episodes are returned too: the table's oracle row)."""
+    where ``oracle_settings`` (the device oracle's search, over its defaults) leave the scene's oracle as
+    it is, else computed under them (then the oracle's own episodes are returned too: the table's oracle
+    row)."""
     seeds = episode_seeds(episodes)
-    if not oracle_settings or oracle_settings == oracle_of(scene)["settings"]:
+    oracle = oracle_of(scene)
+    settings = {**oracle["settings"], **oracle_settings} if oracle["settings"] else {}   # the ideal one takes none
+    if settings == oracle["settings"]:
         anchors = load_anchors(scene, seeds, echo=lambda line: None)
         return anchors.zero, anchors.oracle, None
-    zero, oracle, planned = compute_anchors(scene, seeds, oracle_settings)
-    return zero, oracle, planned
+    return compute_anchors(scene, seeds, settings)
 
 
 def compute_anchors(scene: str, seeds: list[int], oracle_settings: dict[str, Any] | None = None

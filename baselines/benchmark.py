@@ -231,7 +231,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
             pooled = [e for e, _ in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
-            merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])))
+            merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
             if algo == TORCH_PPO:
@@ -274,7 +274,7 @@ def _listed(value: Any) -> str:
 def _oracle_text(plan: Plan) -> str:
     """The device oracle's search settings as the plan runs it (the shipped oracle's, then the plan's)."""
     shipped = ORACLE["laryngoscope"]["settings"]
-    settings = {**shipped, **plan.oracle}
+    settings = {**shipped, **plan.oracle}                  # as anchor_job runs it
     return _listed(settings) + ("; the anchors that ship with the package, `softenv/baselines/shipped_anchors/`"
                                 if settings == shipped else "")
 
@@ -403,9 +403,10 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"and BLAS; softenv {prov['softenv']}, numpy {prov['numpy']}, gymnasium {prov['gymnasium']}, "
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
-          f"agents, pooled); training seeds per agent: {_listed(plan.seeds)}; agent budgets (env steps): "
+          f"agents); training seeds per agent: {_listed(plan.seeds)}; agent budgets (env steps): "
           f"{'; '.join(f'{a} {_listed(b)}' for a, b in budgets.items()) or 'none'}. Cells: "
-          "mean [95 % bootstrap interval]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
+          "mean [95 % interval: a bootstrap over the test episodes; for agents over their training seeds, then the "
+          "episodes of each drawn seed, so seeds that learned apart widen it]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
           "E_oracle) per episode, E = the episode's summed RMS shape error on its target; 0 = no force, 100 = the planning "
           "oracle: on the ideal device the true response and creep planned ahead (`baselines.policies.PlanningOracle`), "
           "on the laryngoscope every episode planned through the device, contact and tissue by the cross-entropy "

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES
-from softenv.stats import bootstrap_ci, iqm
+from softenv.stats import bootstrap_ci, iqm, nested_interval
 
 # The protocol: test targets only, episode i seeded FIRST_SEED + i, EPISODES of them. Bump the version when
 # anything a score depends on changes (the seeds, the error sum, the split): shipped anchors and leaderboard
@@ -69,20 +69,29 @@ def normalized_scores(error_sum: np.ndarray, zero: np.ndarray, oracle: np.ndarra
 
 @dataclass
 class Episodes:
-    """Per-episode metrics of one policy on one scene."""
+    """Per-episode metrics of one policy on one scene: ``runs`` training seeds' episodes one after the
+    other (each the same number), or one run."""
 
     policy: str
     scene: str
     values: dict[str, np.ndarray]
     decision_us: float
+    runs: int = 1
 
     def summary(self, seed: int = 0) -> dict[str, Any]:
+        """Each metric's mean with its 95 % interval and its IQM: over the runs (training seeds), then the
+        episodes within each drawn run (:func:`softenv.stats.nested_interval`), so seeds that learned apart
+        widen it; a metric some episodes lack (steps to success) over the episodes that have it."""
         out: dict[str, Any] = {"policy": self.policy, "scene": self.scene, "episodes": len(self.values["success"]),
-                               "decision_us": self.decision_us}
+                               "decision_us": self.decision_us, "runs": self.runs}
         for name in (*METRICS, *(c for c in CLINICAL if c in self.values)):
             v = self.values[name].astype(np.float64)
             finite = v[np.isfinite(v)]
-            mean, lo, hi = bootstrap_ci(finite, seed=seed)
+            if finite.size == v.size and v.size:
+                by_run = v.reshape(self.runs, -1)
+                mean, lo, hi = nested_interval(by_run, seed=seed)
+            else:
+                mean, lo, hi = bootstrap_ci(finite, seed=seed)
             out[name] = {"mean": mean, "ci_low": lo, "ci_high": hi, "iqm": iqm(finite), "n": int(finite.size)}
         return out
 

@@ -94,6 +94,8 @@ class TrajectoryOracle(ReplayPolicy):
         seed: the sampler's seed.
     """
 
+    VERSION = 2            # 2: one generator per episode. Bump when the search changes: shipped anchors name it
+
     def __init__(self, scene: str, candidates: int = 16, iterations: int = 30, elites: int = 4, knot_every: int = 25,
                  sigma: float = 0.15, seed: int = 0) -> None:
         for name, value, low in (("candidates", candidates, 2), ("iterations", iterations, 0), ("elites", elites, 1),

@@ -43,7 +43,7 @@ from softenv._artifact import atomic_write
 from softenv.bench.timing import code_revision, machine_info
 from softenv.envs.torch_twin import usable_device
 from softenv.parallel import Interrupted, Job, describe, run_jobs
-from softenv.stats import bootstrap_ci
+from softenv.stats import bootstrap_ci, nested_interval
 
 from .anchors import anchor_job
 from .evaluate import SCENES, evaluate, normalized_scores, scene_kwargs
@@ -330,9 +330,9 @@ def main(argv: list[str] | None = None) -> None:
         mean, lo, hi = bootstrap_ci(score)
         lines.append(f"| {seed} | {mean:.1f} [{lo:.1f}, {hi:.1f}] | {run['env_steps']:,} | {run['wall_s']:.0f} | "
                      f"{run['steps_per_s']:,.0f} |")
-    mean, lo, hi = bootstrap_ci(np.concatenate(scores))
+    mean, lo, hi = nested_interval(np.stack(scores))
     summary = (f"{a.scene}, ppo-torch on {a.device}, {len(a.seeds)} seeds x {a.episodes} test episodes: normalized "
-               f"score {mean:.1f} [{lo:.1f}, {hi:.1f}] (mean [95 % bootstrap interval], pooled)")
+               f"score {mean:.1f} [{lo:.1f}, {hi:.1f}] (mean [95 % interval: seeds, then their episodes, resampled])")
     print("\n".join(lines) + "\n\n" + summary)
     if a.report is not None:
         machine = machine_info()

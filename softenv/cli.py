@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import signal
 import sys
 import time
@@ -447,6 +448,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with stop_on_signals():               # SIGTERM stops as Ctrl-C does: one line, no traceback
             return _dispatch(args, argv)
+    except BrokenPipeError:                   # the reader stopped early (| head): what it read was what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())      # no second error at exit's flush
+        return 0
     except (ValueError, OSError) as exc:        # bad arguments, files, or a file system that refuses
         print(printable(f"softenv {args.command}: error: {exc}"), file=sys.stderr)
         return 2

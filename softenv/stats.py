@@ -106,9 +106,10 @@ def with_resamples(scores: np.ndarray | list[np.ndarray], resamples: int = RESAM
 
 def nested_draws(scores: np.ndarray, resamples: int, rng: np.random.Generator) -> np.ndarray:
     """``(resamples, runs, episodes)``: a ``(runs, episodes)`` array's runs drawn with replacement, then
-    episodes with replacement within each drawn run."""
+    episodes with replacement within each drawn run (one run: the episodes drawn as :func:`bootstrap_ci`
+    draws them, from the same stream, so the two intervals are one)."""
     runs, episodes = scores.shape
-    picked = rng.integers(0, runs, size=(resamples, runs, 1))
+    picked = rng.integers(0, runs, size=(resamples, runs, 1)) if runs > 1 else np.zeros((resamples, 1, 1), int)
     return scores[picked, rng.integers(0, episodes, size=(resamples, runs, episodes))]
 
 

@@ -132,6 +132,24 @@ def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(
     assert json.loads((out / "agent.json").read_text())["timesteps"] == 1200
 
 
+def test_a_cell_of_several_seeds_resamples_the_seeds_then_their_episodes():
+    """Two seeds that learned apart (74.7 and 96.1 on their episodes): the cell's interval is the two-level
+    bootstrap of softenv.stats (wide), not the pooled episodes' (narrow); one run keeps the episode bootstrap."""
+    from softenv import stats
+    from softenv.baselines.evaluate import Episodes
+
+    rng = np.random.default_rng(0)
+    scores = np.stack([rng.normal(74.7, 3, 50), rng.normal(96.1, 3, 50)])
+    values = {name: np.zeros(100) for name in ("final_error_mm", "success", "steps_to_success", "peak_force_N")}
+    values["normalized_score"] = scores.ravel()
+    cell = Episodes("ppo", "SoftSphere-v0", values, 1.0, runs=2).summary()["normalized_score"]
+    assert (cell["mean"], cell["ci_low"], cell["ci_high"]) == stats.nested_interval(scores)
+    pooled = stats.bootstrap_ci(scores.ravel())
+    assert cell["ci_high"] - cell["ci_low"] > 4 * (pooled[2] - pooled[1])
+    one = Episodes("ppo", "SoftSphere-v0", values, 1.0).summary()["normalized_score"]
+    assert (one["mean"], one["ci_low"], one["ci_high"]) == pooled
+
+
 def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monkeypatch):
     from softenv.baselines.run_store import RunStore
     from softenv.parallel import Interrupted
@@ -145,6 +163,7 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     assert len(seeds) == 2 and seeds[0]["mean"] != seeds[1]["mean"] and all(s["n"] == 4 for s in seeds)
     assert np.mean([s["mean"] for s in seeds]) == pytest.approx(whole[2]["normalized_score"]["mean"], rel=1e-12)
     assert all(s["ci_low"] <= s["mean"] <= s["ci_high"] for s in seeds)
+    assert whole[2]["runs"] == 2 and whole[0]["runs"] == 1          # the agent's cell knows its seeds
     table = format_seeds(whole).splitlines()
     assert table[0] == "| scene | policy | seed 0 | seed 1 |" and table[2].startswith("| SoftSphere-v0 | sac | ")
     save = RunStore.save
