@@ -17,8 +17,7 @@ result file others can check.
 
 from __future__ import annotations
 
-import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import gymnasium as gym
@@ -26,8 +25,8 @@ import numpy as np
 
 from . import stats
 from .baselines.anchors import Anchors, load_anchors, scene_hash, scene_config
-from .baselines.evaluate import CLINICAL, EPISODES, METRICS, PROTOCOL_VERSION, SCENES, SPLIT, evaluate, \
-    normalized_scores, episode_seeds
+from .baselines.evaluate import (CLINICAL, EPISODES, METRICS, PROTOCOL_VERSION, SCENES, SPLIT, episode_seeds, evaluate,
+                                 normalized_scores)
 from .baselines.policies import CallablePolicy, SB3Policy
 
 __all__ = ["Evaluation", "SCENES", "aggregate", "as_policy", "evaluate_policy"]
@@ -70,9 +69,9 @@ class Evaluation:
     metrics: dict[str, np.ndarray]
     anchors: Anchors
     decision_us: float
+    scene_hash: str
     protocol: int = PROTOCOL_VERSION
     split: str = SPLIT
-    scene_hash: str = field(default="")
 
     @property
     def score(self) -> tuple[float, float, float]:
@@ -115,7 +114,7 @@ def evaluate_policy(policy: Any, scene: str = "SoftSphere-v0", episodes: int = E
     if not runs:
         raise ValueError("policy=[]: give at least one policy (one per training seed)")
     seeds = episode_seeds(int(episodes))
-    anchors = load_anchors(scene, seeds, echo if echo is not None else (lambda line: print(line, file=sys.stderr)))
+    anchors = load_anchors(scene, seeds, echo)
     done = [evaluate(as_policy(p, name), scene, len(seeds), seeds) for p in runs]
     names = {e.policy for e in done}
     keys = [k for k in (*METRICS, *CLINICAL) if k in done[0].values and k != "normalized_score"]

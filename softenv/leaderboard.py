@@ -11,7 +11,7 @@ A result is one method on one benchmark scene, as a JSON file (``format_version`
 | ``episodes``, ``seeds`` | the number of test episodes and their seeds (the protocol's first ``episodes``) |
 | ``training_seeds`` | one label per run (training seed); ``[]`` for a method that does not train |
 | ``error_sum``, ``normalized_score`` | per run, per episode: the summed shape error and the normalized score |
-| ``anchors`` | the digest of the anchors the scores were scaled by, and their oracle |
+| ``anchors`` | the digest of the anchors the scores were scaled by, and the oracle (name, version, search) of their 100 |
 | ``aggregates`` | ``mean``, ``ci_low``, ``ci_high``, ``iqm``, ``iqm_low``, ``iqm_high``, ``per_run`` as reported |
 | ``softenv``, ``command``, ``hardware``, ``date`` | what made it |
 | ``notes`` (optional) | a line for the reader (an agent's budget, say) |
@@ -37,7 +37,7 @@ import softenv
 
 from . import stats
 from ._artifact import save_figure, write_text
-from .baselines.anchors import load_anchors, scene_config, scene_hash
+from .baselines.anchors import load_anchors, oracle_of, scene_config, scene_hash
 from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, device_kind, episode_seeds, normalized_scores
 from .bench.timing import machine_info
 from .evaluation import Evaluation
@@ -69,7 +69,7 @@ def result_record(evaluation: Evaluation, kind: str = "submission", command: str
             "split": evaluation.split, "episodes": len(evaluation.seeds), "seeds": list(evaluation.seeds),
             "training_seeds": labels, "error_sum": evaluation.error_sum.tolist(),
             "normalized_score": evaluation.normalized_score.tolist(),
-            "anchors": {"digest": evaluation.anchors.digest(), "source": Path(evaluation.anchors.source).name},
+            "anchors": {"digest": evaluation.anchors.digest(), "oracle": oracle_of(evaluation.scene)},
             "aggregates": {key: summary[key] for key in AGGREGATE_KEYS}, "softenv": softenv.__version__,
             "command": command or f"softenv.evaluation.evaluate_policy({evaluation.policy!r}, {evaluation.scene!r})",
             "hardware": machine_info(), "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}

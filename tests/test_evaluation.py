@@ -116,6 +116,6 @@ def test_bad_input_is_refused_by_name(haptic_world):
     with pytest.raises(ValueError, match=r"actions\[0, 0\] = 2.0: actions must be finite and within \[-1, 1\]"):
         evaluate_policy(lambda obs: np.full((len(obs), 4), 2.0), "SoftSphere-v0", 2)
     with pytest.raises(ValueError, match="same number of runs"):
-        one = Evaluation("a", "SoftSphere-v0", [1000], np.zeros((1, 1)), np.zeros((1, 1)), {}, None, 0.0)  # type: ignore[arg-type]
-        two = Evaluation("a", "SoftSphere-v0", [1000], np.zeros((2, 1)), np.zeros((2, 1)), {}, None, 0.0)  # type: ignore[arg-type]
+        one = Evaluation("a", "SoftSphere-v0", [1000], np.zeros((1, 1)), np.zeros((1, 1)), {}, None, 0.0, "")  # type: ignore[arg-type]
+        two = Evaluation("a", "SoftSphere-v0", [1000], np.zeros((2, 1)), np.zeros((2, 1)), {}, None, 0.0, "")  # type: ignore[arg-type]
         aggregate([one, two])

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from softenv import leaderboard
-from softenv.baselines.anchors import scene_config
+from softenv.baselines.anchors import load_anchors, scene_config
+from softenv.baselines.evaluate import episode_seeds, normalized_scores
 from softenv.baselines.policies import RandomPolicy
 from softenv.cli import main
 from softenv.envs.world import World
@@ -63,16 +64,18 @@ def _other_scene(record: dict) -> dict:
 
 
 def _other_anchors(record: dict) -> dict:
-    """Scores rescaled by other anchors, and consistent with them: the digest gives it away."""
-    out = tampered(record, anchors={"digest": "0123456789abcdef", "source": "mine.json"})
-    return out
+    """Scores rescaled by another scene's anchors, their aggregates consistent with them: the digest gives it away."""
+    other = load_anchors("SoftSphere-v0/stiffening", episode_seeds())
+    scores = normalized_scores(np.array(record["error_sum"]), other.zero, other.oracle)
+    return tampered(record, normalized_score=scores.tolist(), aggregates=leaderboard.aggregates(scores),
+                    anchors={**record["anchors"], "digest": other.digest()})
 
 
 @pytest.mark.parametrize("make, match", [
     (lambda r: tampered(r, split="train"), "split 'train': results are made on the 'test' targets"),
     (_other_scene, "scene_hash '[0-9a-f]+' is not SoftSphere-v0/stiffening's .*another scene config"),
     (lambda r: tampered(r, scene_hash="ffffffffffffffff"), "scene_hash 'ffffffffffffffff' is not SoftSphere-v0's"),
-    (_other_anchors, "anchors digest '0123456789abcdef' is not SoftSphere-v0's shipped anchors'"),
+    (_other_anchors, "anchors digest '[0-9a-f]{16}' is not SoftSphere-v0's shipped anchors' .*another scene's"),
     (_scores_off, "normalized_score of run 1, episode 7 is .*; its error sum with the shipped anchors gives"),
     (_aggregate_off, r"aggregates\['iqm'\] = .*, but the scores give"),
     (lambda r: tampered(r, hardware=None, command=None), "missing fields: command, hardware"),
