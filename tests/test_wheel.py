@@ -63,6 +63,7 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     out = run([softenv, "evaluate", "still:policy", "--scene", "SoftSphereHaptic-v0", "--out", "still.json"], work, env)
     assert "computing" not in out                     # the anchors ship: no oracle planned here
     run([softenv, "leaderboard", "check", "still.json"], work, env)
+    assert "| 1 | **still:policy** |" in run([softenv, "leaderboard", "show", "still.json"], work, env)
     run([softenv, "data", "--points", "441", "--out", "data"], work, env)
     run([softenv, "fit", "--points", "441", "--response", "poly2"], work, env)
     for module in ("softenv.baselines.train", "softenv.baselines.ppo_torch"):
