@@ -42,9 +42,7 @@ def as_policy(policy: Any, name: str | None = None) -> Any:
         wrapped.obs_mode = "goal" if isinstance(policy.observation_space, gym.spaces.Dict) else "vector"
         return wrapped
     if hasattr(policy, "predict") and hasattr(policy, "reset"):
-        if name is not None:
-            policy.name = name
-        return policy
+        return policy                              # its own name; evaluate_policy's name= names the result
     if callable(policy):
         return CallablePolicy(policy, name or str(getattr(policy, "__name__", "policy")))
     raise ValueError(f"policy={policy!r} is neither a callable obs -> actions, a stable-baselines3 model, nor an "
