@@ -190,11 +190,12 @@ def test_the_aggregates_figure_is_drawn(record, tmp_path):
 
 
 def test_a_reader_that_stops_early_is_no_error():
-    """`softenv leaderboard show | head -1`: the pipe closes under the command, which then exits 0, silently."""
+    """`softenv leaderboard show | true`: the reader is gone before the command writes (the pipe breaks on its
+    first write, whatever the pipe's buffer holds), and the command exits 0, silently."""
     import subprocess
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run(["bash", "-o", "pipefail", "-c", f"{sys.executable} -m softenv leaderboard show | head -1"],
+    done = subprocess.run(["bash", "-o", "pipefail", "-c", f"{sys.executable} -m softenv leaderboard show | true"],
                           cwd=root, capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0 and done.stdout == "### SoftSphere-v0\n" and done.stderr == ""
+    assert done.returncode == 0 and done.stderr == ""
