@@ -118,8 +118,7 @@ def compute_anchors(scene: str, seeds: list[int], oracle_settings: dict[str, Any
     if world.device_kind.name == "ideal":
         oracle = evaluate(PlanningOracle(world), scene, len(seeds), list(seeds))
         return zero.values["error_sum_mm"], oracle.values["error_sum_mm"], None
-    settings = ORACLE["laryngoscope"]["settings"] if oracle_settings is None else oracle_settings
-    planner = TrajectoryOracle(scene, **settings)
+    planner = TrajectoryOracle(scene, **(oracle_settings or {}))
     planner.plan(make_baseline("expert", world), len(seeds), list(seeds))
     planned = evaluate(planner, scene, len(seeds), list(seeds))
     return zero.values["error_sum_mm"], planned.values["error_sum_mm"], planned

@@ -56,6 +56,7 @@ API = {
                 "softenv.parallel.stop_on_signals"],
     "Evaluation and the leaderboard": ["softenv.evaluation.evaluate_policy", "softenv.evaluation.Evaluation",
                                        "softenv.evaluation.aggregate", "softenv.evaluation.as_policy",
+                                       "softenv.evaluation.score_aggregates",
                                        "softenv.leaderboard.result_record", "softenv.leaderboard.save_result",
                                        "softenv.leaderboard.read_result", "softenv.leaderboard.check_result",
                                        "softenv.leaderboard.load_results", "softenv.leaderboard.table",

@@ -29,7 +29,7 @@ from .baselines.evaluate import (CLINICAL, EPISODES, METRICS, PROTOCOL_VERSION, 
                                  normalized_scores)
 from .baselines.policies import CallablePolicy, SB3Policy
 
-__all__ = ["Evaluation", "SCENES", "aggregate", "as_policy", "evaluate_policy"]
+__all__ = ["Evaluation", "SCENES", "aggregate", "as_policy", "evaluate_policy", "score_aggregates"]
 
 
 def as_policy(policy: Any, name: str | None = None) -> Any:
@@ -47,6 +47,16 @@ def as_policy(policy: Any, name: str | None = None) -> Any:
         return CallablePolicy(policy, name or str(getattr(policy, "__name__", "policy")))
     raise ValueError(f"policy={policy!r} is neither a callable obs -> actions, a stable-baselines3 model, nor an "
                      "object with predict(obs) and reset()")
+
+
+def score_aggregates(scores: np.ndarray) -> dict[str, Any]:
+    """What an evaluation, and a result file, report of ``(runs, episodes)`` normalized scores: the mean and
+    the IQM, each with its two-level bootstrap interval (:func:`softenv.stats.nested_interval`), and each
+    run's mean."""
+    mean, low, high = stats.nested_interval(scores)
+    iqm, iqm_low, iqm_high = stats.nested_interval(scores, stats.iqm)
+    return {"mean": mean, "ci_low": low, "ci_high": high, "iqm": iqm, "iqm_low": iqm_low, "iqm_high": iqm_high,
+            "per_run": [float(v) for v in scores.mean(axis=1)]}
 
 
 @dataclass
@@ -73,23 +83,22 @@ class Evaluation:
 
     @property
     def score(self) -> tuple[float, float, float]:
-        return stats.nested_interval(self.normalized_score)
+        a = score_aggregates(self.normalized_score)
+        return a["mean"], a["ci_low"], a["ci_high"]
 
     @property
     def iqm(self) -> tuple[float, float, float]:
-        return stats.nested_interval(self.normalized_score, stats.iqm)
+        a = score_aggregates(self.normalized_score)
+        return a["iqm"], a["iqm_low"], a["iqm_high"]
 
     @property
     def per_run(self) -> list[float]:
-        return [float(v) for v in self.normalized_score.mean(axis=1)]
+        return score_aggregates(self.normalized_score)["per_run"]
 
     def summary(self) -> dict[str, Any]:
         """The evaluation's numbers as a report writes them (every aggregate recomputable from the scores)."""
-        mean, low, high = self.score
-        iqm, iqm_low, iqm_high = self.iqm
         return {"policy": self.policy, "scene": self.scene, "runs": len(self.normalized_score),
-                "episodes": len(self.seeds), "mean": mean, "ci_low": low, "ci_high": high, "iqm": iqm,
-                "iqm_low": iqm_low, "iqm_high": iqm_high, "per_run": self.per_run, "decision_us": self.decision_us}
+                "episodes": len(self.seeds), **score_aggregates(self.normalized_score), "decision_us": self.decision_us}
 
     def __str__(self) -> str:
         s = self.summary()

@@ -40,7 +40,7 @@ from ._artifact import save_figure, write_text
 from .baselines.anchors import load_anchors, oracle_of, scene_config, scene_hash
 from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, device_kind, episode_seeds, normalized_scores
 from .bench.timing import machine_info
-from .evaluation import Evaluation
+from .evaluation import Evaluation, score_aggregates
 
 RESULT_FORMAT = "softenv-result"
 RESULT_VERSION = 1
@@ -152,7 +152,7 @@ def check_result(record: dict[str, Any]) -> dict[str, Any]:
         run, episode = map(int, np.argwhere(off)[0])
         raise ValueError(f"normalized_score of run {run}, episode {episode} is {scores[run, episode]!r}; its error sum "
                          f"with the shipped anchors gives {rescaled[run, episode]!r} ({int(off.sum())} such entries)")
-    recomputed = aggregates(scores)
+    recomputed = score_aggregates(scores)
     reported = record["aggregates"]
     for key in AGGREGATE_KEYS:
         if key not in reported:
@@ -160,14 +160,6 @@ def check_result(record: dict[str, Any]) -> dict[str, Any]:
         if not _close(reported[key], recomputed[key]):
             raise ValueError(f"aggregates[{key!r}] = {reported[key]!r}, but the scores give {recomputed[key]!r}")
     return recomputed
-
-
-def aggregates(scores: np.ndarray) -> dict[str, Any]:
-    """What a result reports of its ``(runs, episodes)`` scores (the same code as an evaluation's summary)."""
-    mean, low, high = stats.nested_interval(scores)
-    iqm, iqm_low, iqm_high = stats.nested_interval(scores, stats.iqm)
-    return {"mean": mean, "ci_low": low, "ci_high": high, "iqm": iqm, "iqm_low": iqm_low, "iqm_high": iqm_high,
-            "per_run": [float(v) for v in scores.mean(axis=1)]}
 
 
 def _close(a: Any, b: Any) -> bool:

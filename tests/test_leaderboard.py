@@ -13,7 +13,7 @@ from softenv.baselines.evaluate import episode_seeds, normalized_scores
 from softenv.baselines.policies import RandomPolicy
 from softenv.cli import main
 from softenv.envs.world import World
-from softenv.evaluation import evaluate_policy
+from softenv.evaluation import evaluate_policy, score_aggregates
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,7 @@ def _other_anchors(record: dict) -> dict:
     """Scores rescaled by another scene's anchors, their aggregates consistent with them: the digest gives it away."""
     other = load_anchors("SoftSphere-v0/stiffening", episode_seeds())
     scores = normalized_scores(np.array(record["error_sum"]), other.zero, other.oracle)
-    return tampered(record, normalized_score=scores.tolist(), aggregates=leaderboard.aggregates(scores),
+    return tampered(record, normalized_score=scores.tolist(), aggregates=score_aggregates(scores),
                     anchors={**record["anchors"], "digest": other.digest()})
 
 
