@@ -208,7 +208,6 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
     failed = [r for r in results.values() if not r.ok]
     for scene in plan.scenes:
-        env_id = scene_kwargs(scene)[0]
         anchors = results[f"{scene} anchors"]
         timings[anchors.key] = anchors.wall_s
         if not anchors.ok:
@@ -234,12 +233,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
-            if algo == TORCH_PPO:
-                budget = plan.timesteps.get(algo) or _torch_ppo_budget()
-                what = f"{budget:,} steps, torch on {torch_device()}"
-            else:
-                budget = plan.timesteps.get(algo) or hyperparams(algo, env_id)["n_timesteps"]
-                what = f"{budget:,} steps"
+            what = f"{agent_budget(plan, algo, scene):,} steps" + (f", torch on {torch_device()}"
+                                                                    if algo == TORCH_PPO else "")
             seed_scores = [anchored(r.value[0]).summary()["normalized_score"] if r.ok else None for r in runs]
             summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done), seed_scores=seed_scores))
     elapsed = time.perf_counter() - started
@@ -255,6 +250,14 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
         raise ValueError(f"{len(failed)} of {len(grid)} jobs failed (reported in the tables as missing cells): "
                          + "; ".join(f"{r.key}: {r.error}" for r in failed))
     return summaries
+
+
+def agent_budget(plan: Plan, algo: str, scene: str) -> int:
+    """The env steps an agent trains for on a scene: the plan's, else its YAML's (``ppo-torch``: its Args')."""
+    given = plan.timesteps.get(algo)
+    if given:
+        return given
+    return _torch_ppo_budget() if algo == TORCH_PPO else int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
 
 
 def _torch_ppo_budget() -> int:
@@ -393,8 +396,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
 
     numbers = json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings,
                           "failed_jobs": {r.key: r.error for r in failed}}, indent=1, default=float)
-    budgets = {a: plan.timesteps.get(a) or (_torch_ppo_budget() if a == TORCH_PPO else
-                                            {s: hyperparams(a, scene_kwargs(s)[0])["n_timesteps"] for s in plan.scenes})
+    budgets = {a: plan.timesteps.get(a) or (agent_budget(plan, a, plan.scenes[0]) if a == TORCH_PPO else
+                                            {s: agent_budget(plan, a, s) for s in plan.scenes})
                for a in plan.agents}
     md = ["# Benchmark: baselines and agents on SoftSphere\n",
           f"Made by `{command}` at {prov['code']} in {elapsed / 60:.1f} min over {how}"

@@ -22,10 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from softenv import leaderboard
-from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent
+from softenv.baselines.agents import ALGOS, load_agent, train_agent
 from softenv.baselines.anchors import scene_config
-from softenv.baselines.benchmark import full_plan, quick_plan, scene_baselines
-from softenv.baselines.evaluate import SCENES, scene_kwargs
+from softenv.baselines.benchmark import agent_budget, full_plan, quick_plan, scene_baselines
+from softenv.baselines.evaluate import SCENES
 from softenv.baselines.policies import make_baseline
 from softenv.bench import single_thread_environment, threads_pinned
 from softenv.bench.timing import code_revision
@@ -81,7 +81,7 @@ def main() -> None:
             keys = [f"train {scene} {algo} seed {seed}" for seed in range(seeds[scene])]
             if seeds[scene] and all(k in paths for k in keys):
                 evaluations.append(Job(f"{scene} {algo}", agent_result, (algo, scene, [paths[k] for k in keys])))
-                budgets[f"{scene} {algo}"] = plan.timesteps.get(algo) or hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"]
+                budgets[f"{scene} {algo}"] = agent_budget(plan, algo, scene)
     failed = []
     for result in run_jobs(evaluations, n_jobs=args.jobs):
         if not result.ok:
