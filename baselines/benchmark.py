@@ -5,7 +5,10 @@ Quick mode (``--quick``): every baseline on SoftSphere-v0 and on SoftSphereHapti
 laryngoscope), and the four agents trained briefly in this run on SoftSphere-v0, one seed each
 (budgets printed); under 3 minutes on two cores. Full mode: the nine scenes (seven ideal-device, one
 of them on the FE tongue, two laryngoscope), every baseline that applies to the scene's device, the four agents with their YAML
-budgets over 5 training seeds on SoftSphere-v0 and SoftSphereHaptic-v0 and 3 elsewhere.
+budgets over 5 training seeds on SoftSphere-v0 and SoftSphereHaptic-v0 and 3 elsewhere. Offline
+mode (``--offline``): behaviour cloning and TD3+BC (:mod:`baselines.offline`) trained on each Minari
+dataset of SoftSphereHaptic-v0 (:mod:`baselines.minari_datasets`, made first where the local store lacks
+them), 3 seeds each, beside the expert and random baselines.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import json
 import platform
 import textwrap
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -32,6 +35,7 @@ from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import ORACLE, anchor_job
+from .minari_datasets import KINDS, dataset_id, load_or_make
 from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .policies import BASELINES, applies, make_baseline
 from .run_store import RunStore
@@ -46,10 +50,14 @@ class Plan:
     timesteps: dict[str, int | None] = field(default_factory=dict)   # agent -> budget (None: YAML)
     episodes: int = 100
     oracle: dict[str, Any] = field(default_factory=dict)   # TrajectoryOracle settings (laryngoscope scenes)
+    dataset_episodes: int = 100                        # episodes of each offline agent's dataset
 
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
-AGENTS = (*ALGOS, TORCH_PPO)
+OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's methods (torchrl: the offline extra)
+OFFLINE_STEPS = {"bc": 5_000, "td3bc": 10_000}         # gradient steps: each method's loss is flat by then (docs/datasets.md)
+OFFLINE_AGENTS = tuple(f"{method}-{kind}" for method in OFFLINE_METHODS for kind in KINDS)   # bc-expert: BC on expert-v0
+AGENTS = (*ALGOS, TORCH_PPO, *OFFLINE_AGENTS)
 QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 FIVE_SEEDS = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 
@@ -69,6 +77,11 @@ def haptic_plan() -> Plan:
     (where their learning curves flatten, ``results/haptic-curves/``), 3 training seeds each."""
     scenes = [s for s in SCENES if device_kind(s) == "laryngoscope"]
     return Plan(scenes, list(BASELINES), list(ALGOS), {s: 3 for s in scenes})
+
+
+def offline_plan() -> Plan:
+    """Offline learners on each dataset of SoftSphereHaptic-v0, 3 training seeds, beside the expert and random."""
+    return Plan(["SoftSphereHaptic-v0"], ["expert", "random"], list(OFFLINE_AGENTS), {"SoftSphereHaptic-v0": 3})
 
 
 def scene_baselines(plan: Plan, scene: str) -> list[str]:
@@ -98,12 +111,13 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents:
-            fn = torch_agent_job if algo == TORCH_PPO else agent_job
+            fn = torch_agent_job if algo == TORCH_PPO else offline_agent_job if algo in OFFLINE_AGENTS else agent_job
+            extra = (plan.dataset_episodes,) if algo in OFFLINE_AGENTS else ()
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
                 out.append(Job(f"{scene} {algo} seed {seed}", fn,
-                               (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes)))
-    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+                               (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes, *extra)))
+    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, offline_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
         else 2  # noqa: E731
     return sorted(out, key=expected)
 
@@ -157,6 +171,33 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
     return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
 
 
+def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
+                      dataset_episodes: int) -> AgentResult:
+    """Train (or load) one offline learner (``bc-expert``: BC on the expert dataset) and evaluate it."""
+    from . import offline                                   # torch and torchrl: the offline extra
+
+    _torch_single_thread()
+    method, _, kind = algo.partition("-")
+    args = offline.OfflineArgs(method=method, steps=budget or OFFLINE_STEPS[method])
+    meta = {"scene": scene, "dataset": dataset_id(scene, kind), "dataset_episodes": dataset_episodes, "seed": seed}
+    path = Path(run_dir) / "actor.pt"
+    try:
+        actor, _ = offline.load(path, meta | {"args": asdict(args)})
+    except ValueError:                                      # none yet, of other settings, or damaged: train it
+        dataset = load_or_make(scene, kind, dataset_episodes, Path(run_dir).parent.parent)
+        actor = offline.train(dataset, args, seed, log=lambda line: None)
+        offline.save(actor, args, meta, path)
+    return evaluate(offline.OfflinePolicy(actor, algo), scene, episodes), None
+
+
+def ensure_datasets(plan: Plan, runs_dir: Path, echo: Callable[[str], None]) -> None:
+    """Make, before any job runs, each dataset the plan's offline agents train on that Minari's local
+    store lacks (two workers never make one together)."""
+    for scene in plan.scenes:
+        for kind in dict.fromkeys(a.partition("-")[2] for a in plan.agents if a in OFFLINE_AGENTS):
+            load_or_make(scene, kind, plan.dataset_episodes, runs_dir, echo)
+
+
 def torch_device() -> str:
     import torch                                            # torch: the rl extra
 
@@ -175,6 +216,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     if TORCH_PPO in plan.agents and torch_device() == "cpu":
         echo(f"{TORCH_PPO}: no GPU in this process; it trains on CPU tensors (the table says so)")
     started = time.perf_counter()
+    ensure_datasets(plan, runs_dir, echo)
     grid = jobs(plan, runs_dir)
     store = RunStore(runs_dir)
     results: dict[str, JobResult] = {}
@@ -233,10 +275,9 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
-            what = f"{agent_budget(plan, algo, scene):,} steps" + (f", torch on {torch_device()}"
-                                                                    if algo == TORCH_PPO else "")
             seed_scores = [anchored(r.value[0]).summary()["normalized_score"] if r.ok else None for r in runs]
-            summaries.append(_with(merged.summary(), kind=f"agent ({what})", seeds=len(done), seed_scores=seed_scores))
+            summaries.append(_with(merged.summary(), kind=_agent_kind(plan, algo, scene), seeds=len(done),
+                                   seed_scores=seed_scores))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
     echo("")
@@ -253,11 +294,22 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
 
 
 def agent_budget(plan: Plan, algo: str, scene: str) -> int:
-    """The env steps an agent trains for on a scene: the plan's, else its YAML's (``ppo-torch``: its Args')."""
+    """The env steps an agent trains for on a scene: the plan's, else its YAML's (``ppo-torch``: its Args'); an
+    offline learner's gradient steps."""
     given = plan.timesteps.get(algo)
     if given:
         return given
+    if algo in OFFLINE_AGENTS:
+        return OFFLINE_STEPS[algo.partition("-")[0]]
     return _torch_ppo_budget() if algo == TORCH_PPO else int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
+
+
+def _agent_kind(plan: Plan, algo: str, scene: str) -> str:
+    steps = agent_budget(plan, algo, scene)
+    if algo in OFFLINE_AGENTS:
+        kind = algo.partition("-")[2]
+        return f"offline ({steps:,} gradient steps on {kind}-v0, {plan.dataset_episodes} episodes)"
+    return f"agent ({steps:,} steps" + (f", torch on {torch_device()})" if algo == TORCH_PPO else ")")
 
 
 def _torch_ppo_budget() -> int:
@@ -510,7 +562,9 @@ def _error_plot_name(stem: str) -> str:
 def agent_colours(agents: list[str], plt: Any) -> dict[str, Any]:
     """One colour per agent in every report, whichever agents a plan trains."""
     known = [*ALGOS, TORCH_PPO]
-    return {algo: plt.get_cmap("tab10").colors[known.index(algo) % 10] for algo in agents}
+    colours = {algo: plt.get_cmap("tab10").colors[i] for i, algo in enumerate(known)}
+    colours |= {algo: plt.get_cmap("tab20").colors[i] for i, algo in enumerate(OFFLINE_AGENTS)}   # 12 more
+    return {algo: colours[algo] for algo in agents}
 
 
 def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
@@ -544,7 +598,7 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
         ax.set_title(scene, fontsize=8)
     if not scenes:
         axes.flat[0].axis("off")
-        axes.flat[0].text(0.5, 0.5, "no agents in this run", ha="center", transform=axes.flat[0].transAxes)
+        axes.flat[0].text(0.5, 0.5, "no learning curves in this run (online agents draw them)", ha="center", transform=axes.flat[0].transAxes)
     seeds = {algo: [len(curves[s, algo]) for s in scenes if curves.get((s, algo))] for algo in plan.agents}
     handles = [plt.Line2D([], [], color=colours[a], label=seed_label(a, seeds[a])) for a in plan.agents if seeds[a]]
     ncol = _legend_columns(fig, len(handles))

@@ -20,6 +20,7 @@ PROTOCOL_VERSION = 1
 FIRST_SEED = 1000
 EPISODES = 100
 SPLIT = "test"
+TRAIN_SPLIT = "train"          # the targets agents train on, and offline datasets record
 
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
 # the laryngoscope scenes' clinical metrics (softenv.clinical), from info["clinical"] at each episode's end
@@ -46,13 +47,13 @@ def episode_seeds(episodes: int = EPISODES) -> list[int]:
     return [FIRST_SEED + i for i in range(episodes)]
 
 
-def scene_kwargs(scene: str, obs_mode: str = "vector") -> tuple[str, dict[str, Any]]:
-    """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets."""
+def scene_kwargs(scene: str, obs_mode: str = "vector", split: str = SPLIT) -> tuple[str, dict[str, Any]]:
+    """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets (or ``split``'s)."""
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
     env_id, overrides = SCENES[scene]
     kwargs = {**{**ENV_SCENES, **HAPTIC_SCENES}[env_id], **overrides}
-    kwargs["task"] = {**kwargs.get("task", {}), "split": SPLIT}
+    kwargs["task"] = {**kwargs.get("task", {}), "split": split}
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
@@ -117,10 +118,11 @@ def evaluate(policy: Any, scene: str, episodes: int = EPISODES, seed: int | list
     done = np.zeros(episodes, dtype=bool)
     first_success = np.full(episodes, np.nan)
     error_sum = np.zeros(episodes)                 # the episode's summed RMS shape error (mm x steps)
+    returns = np.zeros(episodes)                   # the episode's summed reward
     final: dict[str, np.ndarray] = {}
     step = 0
     while not done.all():
-        obs, _, terminated, truncated, info = venv.step(policy.predict(obs))
+        obs, reward, terminated, truncated, info = venv.step(policy.predict(obs))
         step += 1
         running = ~done
         success_now = np.where(info.get("_is_success", np.zeros(episodes, bool)), info.get("is_success", False), False)
@@ -136,11 +138,12 @@ def evaluate(policy: Any, scene: str, episodes: int = EPISODES, seed: int | list
             for key in CLINICAL if "clinical" in fi else ():
                 final.setdefault(key, np.full(episodes, np.nan))[ended] = fi["clinical"][key][ended]
         error_sum += np.where(running, now, 0.0)
+        returns += np.where(running, reward, 0.0)
         first_success = np.where(running & success_now & np.isnan(first_success), step, first_success)
         done |= ended
     values = {"final_error_mm": final["shape_error_mm"], "success": final["is_success"].astype(np.float64),
               "normalized_score": final["normalized_score"], "steps_to_success": first_success,
-              "peak_force_N": final["peak_force_N"], "error_sum_mm": error_sum, **{key: final[key] for key in CLINICAL if key in final}}
+              "peak_force_N": final["peak_force_N"], "error_sum_mm": error_sum, "return": returns, **{key: final[key] for key in CLINICAL if key in final}}
     decision_us = getattr(policy, "decision_us", None)
     return Episodes(getattr(policy, "name", str(policy)), scene, values,
                     decision_us if decision_us is not None else decision_latency_us(policy, obs))

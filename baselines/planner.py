@@ -113,16 +113,17 @@ class TrajectoryOracle(ReplayPolicy):
         self.history: list[float] = []        # the mean best error sum after each iteration (mm x steps)
         self.decision_us = float("nan")       # planning wall time per decision of the plan
 
-    def plan(self, warm_start: Any, episodes: int, seed: int | list[int] = 1000) -> np.ndarray:
+    def plan(self, warm_start: Any, episodes: int, seed: int | list[int] = 1000, **make: Any) -> np.ndarray:
         """Plan the ``episodes`` evaluation episodes seeded ``seed, seed + 1, ...`` (or ``seed[i]``, as
         :func:`~softenv.baselines.evaluate.evaluate` seeds them), starting from ``warm_start``'s actions;
         returns each episode's best summed shape error. Each episode's search draws from a generator of
         its own (seeded by the sampler's seed and the episode's), so an episode's plan does not depend on
-        which episodes are planned beside it."""
+        which episodes are planned beside it. ``make`` overrides scene sections as
+        :func:`~softenv.baselines.evaluate.evaluate`'s does (``task={"split": "train"}``: the training targets)."""
         started = time.perf_counter()
         seeds = [seed + i for i in range(episodes)] if isinstance(seed, int) else list(seed)
         recorder = RecordingPolicy(warm_start)
-        best_error = evaluate(recorder, self.scene, episodes, seeds).values["error_sum_mm"]
+        best_error = evaluate(recorder, self.scene, episodes, seeds, **make).values["error_sum_mm"]
         base = np.stack(recorder.actions, axis=1).astype(np.float64)        # (n, H, 4)
         n, horizon = base.shape[:2]
         knots = np.arange(0, horizon + self.knot_every, self.knot_every)
@@ -139,7 +140,7 @@ class TrajectoryOracle(ReplayPolicy):
             trial = np.concatenate([best[:, None], mean[:, None] + noise], axis=1)     # (n, K, M, 4)
             actions = np.clip(base[:, None] + np.einsum("tm,nkmc->nktc", weights, trial), -1.0, 1.0)
             replay = ReplayPolicy(actions.reshape(n * self.candidates, horizon, 4))
-            error = evaluate(replay, self.scene, n * self.candidates, rollout_seeds).values["error_sum_mm"]
+            error = evaluate(replay, self.scene, n * self.candidates, rollout_seeds, **make).values["error_sum_mm"]
             error = error.reshape(n, self.candidates)
             order = np.argsort(error, axis=1, kind="stable")
             improved = error[np.arange(n), order[:, 0]] < best_error

@@ -20,6 +20,8 @@ import numpy as np
 
 from . import bench, leaderboard
 from .baselines import benchmark
+from .baselines import minari_datasets
+from .baselines.minari_datasets import DATASET_SCENES, KINDS as DATASET_KINDS
 from .baselines.evaluate import EPISODES, SCENES
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
 from .evaluation import evaluate_policy
@@ -149,8 +151,9 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
 def compare_plan(args: argparse.Namespace) -> tuple[benchmark.Plan, str]:
     """The plan of ``softenv compare`` (its profile, narrowed by the options) and its report's stem."""
-    profile = "quick" if args.quick else "haptic" if args.haptic else "full"
-    plan = {"quick": benchmark.quick_plan, "haptic": benchmark.haptic_plan, "full": benchmark.full_plan}[profile]()
+    profile = "quick" if args.quick else "haptic" if args.haptic else "offline" if args.offline else "full"
+    plan = {"quick": benchmark.quick_plan, "haptic": benchmark.haptic_plan, "offline": benchmark.offline_plan,
+            "full": benchmark.full_plan}[profile]()
     if args.scenes:
         plan.scenes = args.scenes
         plan.seeds = {s: plan.seeds.get(s, 5 if s in benchmark.FIVE_SEEDS else 3) for s in args.scenes}
@@ -170,6 +173,8 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
     if missing:
         raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {missing} missing")
     plan, stem = compare_plan(args)
+    if any(agent in benchmark.OFFLINE_AGENTS for agent in plan.agents):
+        _need_offline("softenv compare's offline agents")
     if args.quick:
         print(f"softenv compare --quick: {' and '.join(plan.scenes)} test targets, {plan.episodes} episodes per policy; "
               f"agents trained now on SoftSphere-v0 for "
@@ -177,6 +182,35 @@ def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
               "full benchmark")
     benchmark.run(plan, Path(args.out), Path(args.runs), bench.command_line(argv), stem=stem, executor=args.executor,
                   n_jobs=args.jobs if args.jobs is not None else usable_cores(), retries=args.retries)
+
+
+def _need_offline(what: str) -> None:
+    missing = [name for name in ("minari", "jax", "torchrl") if importlib.util.find_spec(name) is None]
+    if missing:
+        raise ValueError(f"{what} need the offline extra (pip install 'softenv[offline]'): {missing} missing")
+
+
+def cmd_datasets(args: argparse.Namespace) -> None:
+    _need_offline("softenv datasets")
+    import minari                                           # the offline extra
+
+    if args.action == "make":
+        for scene in args.scenes:
+            for kind in args.kinds:
+                dataset = minari_datasets.make_dataset(scene, kind, args.episodes, args.runs,
+                                                reference_episodes=args.reference_episodes)
+                print(printable(f"{dataset.spec.dataset_id}: {dataset.total_episodes} episodes, {dataset.total_steps:,} "
+                                f"steps, {minari_datasets.size_bytes(dataset) / 1e6:.1f} MB in {dataset.spec.data_path}"))
+        return
+    found = [name for name in minari.list_local_datasets() if name.startswith(f"{minari_datasets.NAMESPACE}/")]
+    if not found:
+        print("no softenv datasets in Minari's local store (softenv datasets make)")
+    for name in sorted(found):
+        dataset = minari.load_dataset(name)
+        meta = dataset.storage.metadata
+        print(printable(f"{name}: {dataset.total_episodes} episodes, {dataset.total_steps:,} steps, "
+                        f"{minari_datasets.size_bytes(dataset) / 1e6:.1f} MB; {meta.get('algorithm_name')}; reference returns "
+                        f"{meta.get('ref_min_score'):.1f} (0) and {meta.get('ref_max_score'):.1f} (1)"))
 
 
 def cmd_score(args: argparse.Namespace) -> None:
@@ -356,6 +390,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="the two laryngoscope scenes, every baseline, the four agents at their converged budgets "
                               "over 3 seeds (report benchmark_haptic.*; on 2 cores about 3 h from an empty --runs, 9 min with "
                               "its agents trained)")
+    profile.add_argument("--offline", action="store_true",
+                         help="behaviour cloning and TD3+BC on each Minari dataset of SoftSphereHaptic-v0 (made first "
+                              "where missing), 3 seeds each (report benchmark_offline.*; needs softenv[offline])")
     p.add_argument("--scenes", nargs="+", choices=list(benchmark.SCENES), metavar="SCENE",
                    help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
     p.add_argument("--policies", nargs="*", choices=list(benchmark.BASELINES), metavar="POLICY",
@@ -376,6 +413,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local processes, or Ray tasks (RAY_ADDRESS names the cluster; softenv[ray])")
     p.add_argument("--retries", type=_bounded(int, 0, 100), default=1,
                    help="re-runs of a failed job before it is reported (0-100; default 1)")
+
+    p = sub.add_parser("datasets", help="Minari datasets of the laryngoscope scenes: make them, or list those made")
+    actions = p.add_subparsers(dest="action", required=True)
+    q = actions.add_parser("make", help="record datasets into Minari's local store ($MINARI_DATASETS_PATH, else "
+                                        "~/.minari/datasets), replacing any of the same id")
+    q.add_argument("--scenes", nargs="+", choices=list(DATASET_SCENES), default=["SoftSphereHaptic-v0"], metavar="SCENE",
+                   help=f"laryngoscope scenes: {', '.join(DATASET_SCENES)} (default: SoftSphereHaptic-v0)")
+    q.add_argument("--kinds", nargs="+", choices=list(DATASET_KINDS), default=list(DATASET_KINDS), metavar="KIND",
+                   help=f"demonstrators: {', '.join(DATASET_KINDS)} (default: all)")
+    q.add_argument("--episodes", type=_bounded(int, 1, 100_000), default=100, help="episodes per dataset (default 100)")
+    q.add_argument("--reference-episodes", type=_bounded(int, 1, EPISODES), default=EPISODES,
+                   help=f"test episodes the reference returns average (default: the protocol's {EPISODES})")
+    q.add_argument("--runs", default="runs", help="where the ppo dataset's agent is trained, or read back (default: runs)")
+    actions.add_parser("list", help="the softenv datasets in Minari's local store, with their sizes")
 
     p = sub.add_parser("play", help="drive the laryngoscope yourself (keyboard, mouse, gamepad); scored at the end",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -472,6 +523,8 @@ def _dispatch(args: argparse.Namespace, argv: list[str]) -> int:
         cmd_compare(args, argv)
     elif args.command == "evaluate":
         cmd_evaluate(args, argv)
+    elif args.command == "datasets":
+        cmd_datasets(args)
     elif args.command == "leaderboard":
         cmd_leaderboard(args)
     elif args.command == "score":

@@ -1,0 +1,352 @@
+"""Minari datasets of the laryngoscope scenes: demonstrations for imitation and offline RL.
+
+Each dataset is made here, locally, through Minari's own :class:`minari.DataCollector`, and kept in
+Minari's local store (``$MINARI_DATASETS_PATH``, else ``~/.minari/datasets``), so
+``minari.load_dataset("softenv/SoftSphereHaptic-v0/expert-v0")`` finds it; nothing is downloaded.
+Episode ``i`` is reset with seed ``i`` on the scene's training targets (the benchmark tests on others),
+so every episode replays bit for bit through ``dataset.recover_environment()`` from its stored seed.
+
+| kind | demonstrator |
+|---|---|
+| ``expert`` | the scripted expert (the benchmark's ``expert`` baseline: the device model inverted) |
+| ``oracle`` | the trajectory oracle (CEM through the device, planned per episode on its training target) |
+| ``novice`` | the expert's hand path degraded to the published novice profile (:mod:`softenv.training.profiles`) |
+| ``mixed`` | a skills lab's day: expert, intermediate and novice episodes in turn |
+| ``random`` | uniform actions |
+| ``ppo`` | a stable-baselines3 PPO agent's deterministic rollouts, trained at its YAML budget (seed 0) |
+
+Reference scores (``ref_min_score``, ``ref_max_score``) are the mean returns of the benchmark's two
+anchor policies, no force and the oracle, on the protocol's test episodes, so
+``minari.get_normalized_score`` puts them at 0 and 1. The benchmark's own score scales each episode's
+summed shape error between the same two policies (:mod:`softenv.baselines.anchors`); a return also
+counts the reward's force and smoothness terms, so the two scales agree at their ends, not between.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Protocol
+
+import gymnasium as gym
+import numpy as np
+
+import softenv
+from softenv._cache import cache_dir, cache_key
+from softenv._progress import progress
+from softenv.envs.config import make_config
+from softenv.envs.world import World
+from softenv.training import profiles
+from softenv.training.hand import action_toward, relative_hand_pose
+from softenv.training.scoring import replay_hand
+from softenv.training.trainee import degrade, expert_hand_log
+
+from .agents import hyperparams, load_agent, train_agent
+from .anchors import scene_config
+from .evaluate import SCENES, TRAIN_SPLIT, device_kind, episode_seeds, evaluate, scene_kwargs
+from .planner import TrajectoryOracle
+from .policies import Policy, RandomPolicy, ZeroPolicy, make_baseline
+
+NAMESPACE = "softenv"
+VERSION = 0                        # bump when a demonstrator or the collection changes what a dataset holds
+KINDS = ("expert", "oracle", "mixed", "novice", "random", "ppo")
+DATASET_SCENES = tuple(s for s in SCENES if device_kind(s) == "laryngoscope")
+MIXED = ("expert", "intermediate", "novice")        # the mixed dataset's episodes cycle through them
+AGENT = "ppo"                      # the ppo dataset's agent, trained at its YAML budget (the benchmark's)
+REFERENCE_EPISODES = 100
+
+
+def dataset_id(scene: str, kind: str) -> str:
+    """Minari's id of a dataset: ``softenv/<scene>/<kind>-v0``."""
+    _check(scene, kind)
+    return f"{NAMESPACE}/{scene}/{kind}-v{VERSION}"
+
+
+def _check(scene: str, kind: str) -> None:
+    if scene not in DATASET_SCENES:
+        raise ValueError(f"scene={scene!r}: datasets are made on the laryngoscope scenes {list(DATASET_SCENES)} "
+                         "(on the ideal device the planning oracle solves each step in closed form)")
+    if kind not in KINDS:
+        raise ValueError(f"kind={kind!r}: valid dataset kinds are {list(KINDS)}")
+
+
+# -- demonstrators: who acts in an episode ----------------------------------------------------------
+
+class Demonstrator(Protocol):
+    """Acts in one episode at a time: :meth:`begin` with the episode's seed before its reset, then
+    :meth:`act` every step (it may read the env, as a hand on the device feels where it is)."""
+
+    name: str
+
+    def begin(self, seed: int) -> None: ...
+
+    def act(self, env: Any, obs: np.ndarray) -> np.ndarray: ...
+
+
+class PolicyDemonstrator:
+    """A benchmark policy (batched ``predict``), one row at a time."""
+
+    def __init__(self, make: Callable[[int], Policy], name: str) -> None:
+        self.make, self.name = make, name
+        self.policy: Policy | None = None
+
+    def begin(self, seed: int) -> None:
+        self.policy = self.make(seed)
+        self.policy.reset()
+
+    def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        assert self.policy is not None, "begin() first"
+        return np.asarray(self.policy.predict(obs[None]), dtype=np.float32)[0]
+
+
+class PlannedDemonstrator:
+    """Plays each episode's planned actions (the trajectory oracle's, planned beforehand by seed)."""
+
+    def __init__(self, plans: dict[int, np.ndarray], name: str) -> None:
+        self.plans, self.name = plans, name
+        self._actions, self._t = np.zeros((1, 4), np.float32), 0
+
+    def begin(self, seed: int) -> None:
+        self._actions, self._t = self.plans[seed], 0
+
+    def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        action = self._actions[min(self._t, len(self._actions) - 1)]
+        self._t += 1
+        return action
+
+
+class TraineeDemonstrator:
+    """A synthetic trainee: the expert's hand path on this episode's target, degraded by ``amounts``
+    (:func:`softenv.training.trainee.degrade`, its tremor drawn from the episode's seed), followed by
+    steering the hand toward each next pose, as a replayed device log is."""
+
+    def __init__(self, scene: str, amounts: dict[str, float], name: str) -> None:
+        self.scene, self.amounts, self.name = scene, amounts, name
+        self.sections = _sections(scene)
+        self._poses, self._t = np.zeros((1, 4)), 0
+
+    def begin(self, seed: int) -> None:
+        env: Any = make_env(self.scene).unwrapped
+        expert = make_baseline("expert", env.world)
+        expert.reset()
+        obs, _ = env.reset(seed=seed)
+        poses, done = [relative_hand_pose(env)], False
+        while not done:
+            obs, _, terminated, truncated, _ = env.step(np.asarray(expert.predict(obs[None]), np.float32)[0])
+            poses.append(relative_hand_pose(env))
+            done = terminated or truncated
+        dt = env.world.config["dynamics"]["dt"]
+        log = np.column_stack([np.arange(len(poses)) * dt, np.array(poses)])
+        self._poses = degrade(log, self.sections, seed=seed, **self.amounts)[:, 1:]
+        self._t = 0
+
+    def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        self._t += 1
+        return action_toward(env, self._poses[min(self._t, len(self._poses) - 1)])
+
+
+class Cycle:
+    """Episode ``i`` by demonstrator ``i mod n`` (the mixed dataset)."""
+
+    def __init__(self, demonstrators: list[Demonstrator], name: str) -> None:
+        self.demonstrators, self.name = demonstrators, name
+        self._order = 0
+        self.current: Demonstrator = demonstrators[0]
+
+    def begin(self, seed: int) -> None:
+        self.current = self.demonstrators[self._order % len(self.demonstrators)]
+        self._order += 1
+        self.current.begin(seed)
+
+    def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
+        return self.current.act(env, obs)
+
+
+def _sections(scene: str) -> dict[str, Any]:
+    """The scene's config sections on its training targets (what a hand log's scene is)."""
+    _, kwargs = scene_kwargs(scene, split=TRAIN_SPLIT)
+    kwargs.pop("obs_mode")
+    return kwargs
+
+
+def make_env(scene: str, split: str = TRAIN_SPLIT) -> gym.Env:
+    """The single env a dataset of ``scene`` is recorded in (training targets), or evaluated in (``split="test"``)."""
+    env_id, kwargs = scene_kwargs(scene, split=split)
+    return gym.make(env_id, **kwargs)
+
+
+def trainee_amounts(scene: str) -> dict[str, dict[str, float]]:
+    """The published profiles' error amounts (:mod:`softenv.training.profiles`, found at the family's
+    centre on the scene's hand scene), by profile name."""
+    sections = _sections(scene)
+    log = expert_hand_log(sections)
+    expert = replay_hand(log, sections)
+    out: dict[str, dict[str, float]] = {"expert": {}}
+    for name, study, time_ratio, force_ratio, path_ratio in profiles.PROFILES:
+        if name in ("intermediate", "novice"):
+            out[name] = profiles.build(name, study, (time_ratio, force_ratio, path_ratio), log, expert, sections).amounts
+    return out
+
+
+@dataclass
+class Source:
+    """Who makes a dataset's episodes, and what the metadata says of them."""
+
+    demonstrator: Demonstrator
+    algorithm: str
+    details: dict[str, Any]
+
+
+def source(scene: str, kind: str, seeds: list[int], runs_dir: Path,
+           echo: Callable[[str], None] = print) -> Source:
+    """The demonstrator of ``kind`` on ``scene`` for the episodes seeded ``seeds`` (the oracle plans them
+    here; the agent is trained into ``runs_dir``, or read back from it)."""
+    _check(scene, kind)
+    world = World(make_config(**_sections(scene)))
+    if kind == "expert":
+        return Source(PolicyDemonstrator(lambda seed: make_baseline("expert", world), "expert"),
+                      "scripted expert (the device model inverted)", {})
+    if kind == "random":
+        return Source(PolicyDemonstrator(lambda seed: RandomPolicy(world, seed), "random"),
+                      "uniform random actions (seeded by the episode)", {})
+    if kind == "oracle":
+        planner = TrajectoryOracle(scene)
+        echo(f"{dataset_id(scene, kind)}: planning {len(seeds)} episodes with the trajectory oracle")
+        planner.plan(make_baseline("expert", world), len(seeds), list(seeds), task={"split": TRAIN_SPLIT})
+        return Source(PlannedDemonstrator(dict(zip(seeds, planner.actions)), "oracle"),
+                      f"trajectory oracle v{TrajectoryOracle.VERSION} (CEM through the device)",
+                      {"oracle_settings": {"candidates": planner.candidates, "iterations": planner.iterations,
+                                           "elites": planner.elites, "knot_every": planner.knot_every,
+                                           "sigma": planner.sigma, "seed": planner.seed}})
+    if kind in ("novice", "mixed"):
+        amounts = trainee_amounts(scene)
+        names = MIXED if kind == "mixed" else ("novice",)
+        demonstrators: list[Demonstrator] = [
+            PolicyDemonstrator(lambda seed: make_baseline("expert", world), name) if name == "expert"
+            else TraineeDemonstrator(scene, amounts[name], name) for name in names]
+        what = "expert, intermediate and novice in turn" if kind == "mixed" else "the novice profile"
+        return Source(demonstrators[0] if len(demonstrators) == 1 else Cycle(demonstrators, kind),
+                      f"synthetic trainees: {what} (published profiles)",
+                      {"profiles": {name: amounts[name] for name in names}})
+    agent_steps = int(hyperparams(AGENT, scene_kwargs(scene)[0])["n_timesteps"])
+    run_dir = runs_dir / scene / f"{AGENT}-{agent_steps}-0"
+    echo(f"{dataset_id(scene, kind)}: the {AGENT} agent ({agent_steps:,} steps, seed 0) from {run_dir}")
+    agent = load_agent(train_agent(AGENT, scene, 0, run_dir, agent_steps, progress=False), scene)
+    return Source(PolicyDemonstrator(lambda seed: agent, AGENT),
+                  f"stable-baselines3 {AGENT.upper()}, {agent_steps:,} steps, seed 0, deterministic rollouts",
+                  {"agent": AGENT, "agent_steps": agent_steps, "agent_seed": 0})
+
+
+# -- references: where Minari's normalized score puts 0 and 1 ---------------------------------------
+
+def reference_returns(scene: str, episodes: int = REFERENCE_EPISODES) -> tuple[float, float]:
+    """Mean return of no force and of the trajectory oracle on the protocol's first ``episodes`` test
+    episodes (cached: the oracle plans every episode)."""
+    seeds = episode_seeds(episodes)
+    path = cache_dir() / (cache_key("references", {"scene": scene, "config": scene_config(scene), "seeds": seeds,
+                                                   "oracle": TrajectoryOracle.VERSION}) + ".json")
+    if path.exists():
+        found = json.loads(path.read_text())
+        return float(found["zero"]), float(found["oracle"])
+    world = World(scene_config(scene))
+    zero = evaluate(ZeroPolicy(world), scene, episodes, seeds).values["return"]
+    planner = TrajectoryOracle(scene)
+    planner.plan(make_baseline("expert", world), episodes, seeds)
+    oracle = evaluate(planner, scene, episodes, seeds).values["return"]
+    out = {"zero": float(zero.mean()), "oracle": float(oracle.mean())}
+    path.write_text(json.dumps(out))
+    return out["zero"], out["oracle"]
+
+
+# -- making and reading -----------------------------------------------------------------------------
+
+def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Path = "runs",
+                 reference_episodes: int = REFERENCE_EPISODES,
+                 echo: Callable[[str], None] = print, show_progress: bool = True) -> Any:
+    """Record ``episodes`` episodes of ``kind`` on ``scene`` into Minari's local store (replacing a
+    dataset of the same id) and return the :class:`minari.MinariDataset`."""
+    import minari                                           # the offline extra
+
+    if not 1 <= int(episodes) <= 100_000 or int(episodes) != episodes:
+        raise ValueError(f"episodes={episodes!r}: must be an integer in [1, 100000]")
+    name = dataset_id(scene, kind)
+    seeds = list(range(int(episodes)))
+    src = source(scene, kind, seeds, Path(runs_dir), echo)
+    zero, oracle = reference_returns(scene, reference_episodes)
+    env = minari.DataCollector(make_env(scene), record_infos=False)
+    clinical: dict[str, list[float]] = {}
+    returns = []
+    for seed in progress(seeds, name, enabled=show_progress):
+        src.demonstrator.begin(seed)
+        obs, _ = env.reset(seed=seed)
+        done, total = False, 0.0
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(src.demonstrator.act(env.unwrapped, obs))
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+        for key, value in info["clinical"].items():
+            clinical.setdefault(key, []).append(float(value))
+    if name in minari.list_local_datasets():
+        minari.delete_dataset(name)
+    with warnings.catch_warnings():              # Minari asks for an author's email address; softenv has none to give
+        warnings.filterwarnings("ignore", message=".*author_email.*")
+        dataset = env.create_dataset(
+            dataset_id=name, eval_env=make_env(scene, "test").spec, algorithm_name=src.algorithm, author="softenv",
+            code_permalink="softenv/baselines/minari_datasets.py",
+            ref_min_score=zero, ref_max_score=oracle, requirements=[f"softenv=={softenv.__version__}"],
+            description=f"{src.algorithm} on {scene}'s training targets, episode i seeded i; reference scores: mean return "
+                        f"of no force (0) and of the trajectory oracle (1) over the benchmark's first {reference_episodes} "
+                        "test episodes")
+    env.close()
+    dataset.storage.update_metadata({"softenv": json.dumps({
+        "format_version": VERSION, "scene": scene, "kind": kind, "demonstrator": src.algorithm, **src.details,
+        "scene_config": make_config(**_sections(scene)), "episodes": int(episodes), "seeds": seeds,
+        "reference_episodes": reference_episodes, "returns": returns, "clinical": clinical,
+        "softenv": softenv.__version__})})
+    return minari.load_dataset(name)
+
+
+def size_bytes(dataset: Any) -> int:
+    """The dataset's size on disk."""
+    return sum(f.stat().st_size for f in Path(dataset.spec.data_path).rglob("*") if f.is_file())
+
+
+def softenv_metadata(dataset: Any) -> dict[str, Any]:
+    """What softenv records of a dataset (see :func:`make_dataset`); a dataset softenv did not make, or
+    made under another version, is refused."""
+    raw = dataset.storage.metadata.get("softenv")
+    if raw is None:
+        raise ValueError(f"dataset {dataset.spec.dataset_id!r} records no softenv metadata (softenv did not make it)")
+    meta = json.loads(raw)
+    if meta.get("format_version") != VERSION:
+        raise ValueError(f"dataset {dataset.spec.dataset_id!r}: format_version={meta.get('format_version')!r}; this "
+                         f"softenv reads {VERSION} (make it again: softenv datasets make)")
+    return dict(meta)
+
+
+def load_or_make(scene: str, kind: str, episodes: int = 100, runs_dir: str | Path = "runs",
+                 echo: Callable[[str], None] | None = None) -> Any:
+    """The dataset from Minari's local store when it holds ``episodes`` episodes made by this softenv's
+    version of it, else made now (saying so in one line)."""
+    import minari                                           # the offline extra
+
+    say = echo if echo is not None else (lambda line: print(line, file=sys.stderr))
+    name = dataset_id(scene, kind)
+    if name in minari.list_local_datasets():
+        dataset = minari.load_dataset(name)
+        try:
+            meta = softenv_metadata(dataset)
+            if meta["episodes"] == episodes and meta["reference_episodes"] == REFERENCE_EPISODES:
+                return dataset
+            why = (f"it holds {meta['episodes']} episodes, not {episodes}" if meta["episodes"] != episodes else
+                   f"its references average {meta['reference_episodes']} test episodes, not {REFERENCE_EPISODES}")
+        except ValueError as exc:
+            why = str(exc)
+        say(f"{name}: remade ({why})")
+    else:
+        say(f"{name}: not in Minari's local store; making it")
+    return make_dataset(scene, kind, episodes, runs_dir, echo=say, show_progress=False)
