@@ -200,10 +200,11 @@ class Source:
     details: dict[str, Any]
 
 
-def source(scene: str, kind: str, seeds: list[int], runs_dir: Path,
+def source(scene: str, kind: str, seeds: list[int], runs_dir: Path, agent_steps: int | None = None,
            echo: Callable[[str], None] = print) -> Source:
     """The demonstrator of ``kind`` on ``scene`` for the episodes seeded ``seeds`` (the oracle plans them
-    here; the agent is trained into ``runs_dir``, or read back from it)."""
+    here; the agent is trained into ``runs_dir`` for ``agent_steps``, default its YAML budget, or read
+    back from it)."""
     _check(scene, kind)
     world = World(make_config(**_sections(scene)))
     if kind == "expert":
@@ -231,7 +232,7 @@ def source(scene: str, kind: str, seeds: list[int], runs_dir: Path,
         return Source(demonstrators[0] if len(demonstrators) == 1 else Cycle(demonstrators, kind),
                       f"synthetic trainees: {what} (published profiles)",
                       {"profiles": {name: amounts[name] for name in names}})
-    agent_steps = int(hyperparams(AGENT, scene_kwargs(scene)[0])["n_timesteps"])
+    agent_steps = agent_steps or int(hyperparams(AGENT, scene_kwargs(scene)[0])["n_timesteps"])
     run_dir = runs_dir / scene / f"{AGENT}-{agent_steps}-0"
     echo(f"{dataset_id(scene, kind)}: the {AGENT} agent ({agent_steps:,} steps, seed 0) from {run_dir}")
     agent = load_agent(train_agent(AGENT, scene, 0, run_dir, agent_steps, progress=False), scene)
@@ -264,7 +265,7 @@ def reference_returns(scene: str, episodes: int = REFERENCE_EPISODES) -> tuple[f
 # -- making and reading -----------------------------------------------------------------------------
 
 def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Path = "runs",
-                 reference_episodes: int = REFERENCE_EPISODES,
+                 agent_steps: int | None = None, reference_episodes: int = REFERENCE_EPISODES,
                  echo: Callable[[str], None] = print, show_progress: bool = True) -> Any:
     """Record ``episodes`` episodes of ``kind`` on ``scene`` into Minari's local store (replacing a
     dataset of the same id) and return the :class:`minari.MinariDataset`."""
@@ -274,7 +275,7 @@ def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
         raise ValueError(f"episodes={episodes!r}: must be an integer in [1, 100000]")
     name = dataset_id(scene, kind)
     seeds = list(range(int(episodes)))
-    src = source(scene, kind, seeds, Path(runs_dir), echo)
+    src = source(scene, kind, seeds, Path(runs_dir), agent_steps, echo)
     zero, oracle = reference_returns(scene, reference_episodes)
     env = minari.DataCollector(make_env(scene), record_infos=False)
     clinical: dict[str, list[float]] = {}
@@ -329,9 +330,10 @@ def softenv_metadata(dataset: Any) -> dict[str, Any]:
 
 
 def load_or_make(scene: str, kind: str, episodes: int = 100, runs_dir: str | Path = "runs",
-                 echo: Callable[[str], None] | None = None) -> Any:
+                 echo: Callable[[str], None] | None = None, reference_episodes: int | None = None) -> Any:
     """The dataset from Minari's local store when it holds ``episodes`` episodes made by this softenv's
-    version of it, else made now (saying so in one line)."""
+    version of it (and, where given, its references average ``reference_episodes`` test episodes), else
+    made now, saying so in one line (its references over ``reference_episodes``, default the protocol's)."""
     import minari                                           # the offline extra
 
     say = echo if echo is not None else (lambda line: print(line, file=sys.stderr))
@@ -340,13 +342,14 @@ def load_or_make(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
         dataset = minari.load_dataset(name)
         try:
             meta = softenv_metadata(dataset)
-            if meta["episodes"] == episodes and meta["reference_episodes"] == REFERENCE_EPISODES:
+            if meta["episodes"] == episodes and reference_episodes in (None, meta["reference_episodes"]):
                 return dataset
             why = (f"it holds {meta['episodes']} episodes, not {episodes}" if meta["episodes"] != episodes else
-                   f"its references average {meta['reference_episodes']} test episodes, not {REFERENCE_EPISODES}")
+                   f"its references average {meta['reference_episodes']} test episodes, not {reference_episodes}")
         except ValueError as exc:
             why = str(exc)
         say(f"{name}: remade ({why})")
     else:
         say(f"{name}: not in Minari's local store; making it")
-    return make_dataset(scene, kind, episodes, runs_dir, echo=say, show_progress=False)
+    return make_dataset(scene, kind, episodes, runs_dir, reference_episodes=reference_episodes or REFERENCE_EPISODES,
+                        echo=say, show_progress=False)

@@ -68,6 +68,14 @@ API = {
     "Baselines and agents": ["softenv.baselines.agents.train_agent", "softenv.baselines.agents.load_agent",
                              "softenv.baselines.evaluate.evaluate", "softenv.baselines.evaluate.normalized_scores",
                              "softenv.baselines.benchmark.run"],
+    "Offline datasets and learners": ["softenv.baselines.minari_datasets.make_dataset",
+                                      "softenv.baselines.minari_datasets.load_or_make",
+                                      "softenv.baselines.minari_datasets.dataset_id",
+                                      "softenv.baselines.minari_datasets.softenv_metadata",
+                                      "softenv.baselines.minari_datasets.reference_returns",
+                                      "softenv.baselines.offline.train", "softenv.baselines.offline.OfflineArgs",
+                                      "softenv.baselines.offline.OfflinePolicy", "softenv.baselines.offline.save",
+                                      "softenv.baselines.offline.load"],
 }
 
 

@@ -41,7 +41,7 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     env = {key: value for key, value in os.environ.items() if key not in ("VIRTUAL_ENV", "PYTHONPATH")}
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env['PATH']}"
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    run([python, "-m", "pip", "install", "-q", "-c", str(ROOT / "constraints.txt"), f"{wheel}[all,play]"], tmp_path, env,
+    run([python, "-m", "pip", "install", "-q", "-c", str(ROOT / "constraints.txt"), f"{wheel}[all,play,offline]"], tmp_path, env,
         timeout=1200)
 
     work = tmp_path / "empty"
@@ -66,6 +66,10 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     assert "| 1 | **still:policy** |" in run([softenv, "leaderboard", "show", "still.json"], work, env)
     run([softenv, "data", "--points", "441", "--out", "data"], work, env)
     run([softenv, "fit", "--points", "441", "--response", "poly2"], work, env)
+    env["MINARI_DATASETS_PATH"] = str(tmp_path / "minari")
+    made = run([softenv, "datasets", "make", "--kinds", "expert", "--episodes", "2", "--reference-episodes", "1"], work, env)
+    assert "softenv/SoftSphereHaptic-v0/expert-v0: 2 episodes, 500 steps" in made
+    assert "expert-v0: 2 episodes" in run([softenv, "datasets", "list"], work, env)
     for module in ("softenv.baselines.train", "softenv.baselines.ppo_torch"):
         run([python, "-m", module, "--help"], work, env)
     assert not any(p.name in ("baselines", "examples") for p in work.iterdir())
