@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,8 @@ import numpy as np
 import softenv
 from softenv._cache import cache_dir, cache_key
 from softenv._progress import progress
+from softenv._validation import check_int
+from softenv.bench.timing import code_revision
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 from softenv.training import profiles
@@ -46,7 +49,7 @@ from softenv.training.trainee import degrade, expert_hand_log
 
 from .agents import hyperparams, load_agent, train_agent
 from .anchors import scene_config
-from .evaluate import SCENES, TRAIN_SPLIT, device_kind, episode_seeds, evaluate, scene_kwargs
+from .evaluate import EPISODES, SCENES, TRAIN_SPLIT, device_kind, episode_seeds, evaluate, scene_kwargs
 from .planner import TrajectoryOracle
 from .policies import Policy, RandomPolicy, ZeroPolicy, make_baseline
 
@@ -271,10 +274,11 @@ def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
     dataset of the same id) and return the :class:`minari.MinariDataset`."""
     import minari                                           # the offline extra
 
-    if not 1 <= int(episodes) <= 100_000 or int(episodes) != episodes:
-        raise ValueError(f"episodes={episodes!r}: must be an integer in [1, 100000]")
+    episodes = check_int(episodes, "episodes", 1, 100_000)
+    reference_episodes = check_int(reference_episodes, "reference_episodes", 1, EPISODES)
     name = dataset_id(scene, kind)
-    seeds = list(range(int(episodes)))
+    seeds = list(range(episodes))
+    started = time.perf_counter()
     src = source(scene, kind, seeds, Path(runs_dir), agent_steps, echo)
     zero, oracle = reference_returns(scene, reference_episodes)
     env = minari.DataCollector(make_env(scene), record_infos=False)
@@ -305,9 +309,9 @@ def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
     env.close()
     dataset.storage.update_metadata({"softenv": json.dumps({
         "format_version": VERSION, "scene": scene, "kind": kind, "demonstrator": src.algorithm, **src.details,
-        "scene_config": make_config(**_sections(scene)), "episodes": int(episodes), "seeds": seeds,
+        "scene_config": make_config(**_sections(scene)), "episodes": episodes, "seeds": seeds,
         "reference_episodes": reference_episodes, "returns": returns, "clinical": clinical,
-        "softenv": softenv.__version__})})
+        "softenv": softenv.__version__, "commit": code_revision(), "seconds": time.perf_counter() - started})})
     return minari.load_dataset(name)
 
 

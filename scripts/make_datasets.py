@@ -1,9 +1,9 @@
 """Make the Minari datasets (``softenv.baselines.minari_datasets``) and write what they hold into
-``results/datasets.md`` and ``.json``: episodes, steps, size on disk, time to make, the reference
-returns, each demonstrator's mean return and Minari-normalized score, and its clinical metrics. Run it
-from a clean commit (the files name it); one BLAS thread, as ``softenv compare`` runs. A dataset
-already in Minari's local store with the episodes asked for is read, not made again (its making time
-then reads as the earlier run's).
+``results/datasets.md`` and ``.json``: episodes, steps, size on disk, the commit that made each and in
+how long, the reference returns, each demonstrator's mean return and Minari-normalized score, and its
+clinical metrics. Run it from a clean commit (the files name it); one BLAS thread, as ``softenv
+compare`` runs. A dataset already in Minari's local store with the episodes asked for is read, not
+made again: the table is then the store's catalogue, each row naming the commit that made it.
 
     python scripts/make_datasets.py [--scenes SCENE ...] [--kinds KIND ...] [--episodes 100] [--runs runs]
 """
@@ -15,7 +15,6 @@ import json
 import os
 import shlex
 import sys
-import time
 from pathlib import Path
 
 import minari
@@ -42,14 +41,13 @@ def main() -> None:
     rows = []
     for scene in args.scenes:
         for kind in args.kinds:
-            started = time.perf_counter()
             dataset = load_or_make(scene, kind, args.episodes, args.runs, echo=print)
             meta, raw = softenv_metadata(dataset), dataset.storage.metadata
             returns = np.array(meta["returns"])
             rows.append({"dataset": dataset.spec.dataset_id, "scene": scene, "kind": kind,
                          "demonstrator": meta["demonstrator"], "episodes": dataset.total_episodes,
                          "steps": dataset.total_steps, "megabytes": size_bytes(dataset) / 1e6,
-                         "seconds": time.perf_counter() - started,
+                         "made_at": meta.get("commit", "?"), "seconds": meta.get("seconds", float("nan")),
                          "ref_min_score": raw["ref_min_score"], "ref_max_score": raw["ref_max_score"],
                          "mean_return": float(returns.mean()),
                          "normalized": float(minari.get_normalized_score(dataset, returns).mean()),
@@ -62,12 +60,12 @@ def main() -> None:
              f"(Minari {made_by['minari']}). Each episode seeded by its index on the scene's training targets; "
              "normalized: `minari.get_normalized_score` of the mean return (0: no force, 1: the trajectory oracle, "
              "on the protocol's test episodes).", "",
-             "| dataset | demonstrator | episodes | steps | MB | made in (s) | mean return | normalized | "
+             "| dataset | demonstrator | episodes | steps | MB | made at | made in (s) | mean return | normalized | "
              "peak tongue N | peak incisor N | hand path m | glottic view % |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| `{r['dataset']}` | {r['demonstrator']} | {r['episodes']} | {r['steps']:,} | {r['megabytes']:.1f} "
-                     f"| {r['seconds']:.0f} | {r['mean_return']:.1f} | {r['normalized']:.2f} | "
+                     f"| {r['made_at']} | {r['seconds']:.0f} | {r['mean_return']:.1f} | {r['normalized']:.2f} | "
                      f"{r['peak_tongue_force_N']:.1f} | {r['peak_incisor_force_N']:.1f} | {r['hand_path_m']:.3f} | "
                      f"{r['glottic_view_pct']:.0f} |")
     refs = {r["scene"]: (r["ref_min_score"], r["ref_max_score"]) for r in rows}

@@ -134,8 +134,10 @@ def test_bad_ids_are_refused_naming_the_argument(scene: str, kind: str, named: s
 
 
 def test_bad_episode_counts_and_foreign_datasets_are_refused(made: dict[str, Any], store: Path) -> None:
-    with pytest.raises(ValueError, match="episodes=0"):
+    with pytest.raises(ValueError, match=r"episodes=0 is out of range; allowed range \[1, 100000\]"):
         md.make_dataset(SCENE, "expert", 0)
+    with pytest.raises(ValueError, match=r"reference_episodes=101 is out of range; allowed range \[1, 100\]"):
+        md.make_dataset(SCENE, "expert", 1, reference_episodes=101)
     dataset = made["random"]
     raw = json.loads(dataset.storage.metadata["softenv"])
     dataset.storage.update_metadata({"softenv": json.dumps({**raw, "format_version": 99})})
