@@ -1,5 +1,6 @@
 """The laryngoscope scenes' oracle: whole-episode CEM through the device (baselines.planner)."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -47,6 +48,31 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     again = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
     again.plan(expert, episodes=3)
     np.testing.assert_array_equal(again.actions, oracle.actions)
+
+
+def test_the_oracle_plans_the_targets_its_scene_overrides_name(expert):
+    """plan(..., task={"split": "train"}) searches the training targets (the offline datasets' episodes):
+    its errors are what the plan scores there, and the expert's training-target errors its warm start."""
+    train = {"task": {"split": "train"}}
+    oracle = TrajectoryOracle(SCENE, candidates=4, iterations=2, elites=1)
+    planned = oracle.plan(expert, 2, [0, 1], **train)
+    assert oracle.history[0] == pytest.approx(evaluate(expert, SCENE, 2, [0, 1], **train).values["error_sum_mm"].mean())
+    np.testing.assert_allclose(evaluate(ReplayPolicy(oracle.actions), SCENE, 2, [0, 1], **train).values["error_sum_mm"],
+                               planned, rtol=1e-9)
+    on_test = evaluate(ReplayPolicy(oracle.actions), SCENE, 2, [0, 1]).values["error_sum_mm"]
+    assert not np.allclose(on_test, planned, rtol=1e-3)
+
+
+def test_evaluate_sums_each_episodes_reward(expert):
+    """values["return"] is the episode's summed reward: summed again here over a single env's steps."""
+    recorder = RecordingPolicy(expert)
+    returns = evaluate(recorder, SCENE, 2).values["return"]
+    env_id, kwargs = scene_kwargs(SCENE)
+    env = gym.make(env_id, **kwargs)
+    for i, seed in enumerate((1000, 1001)):
+        env.reset(seed=seed)
+        total = sum(float(env.step(step[i])[1]) for step in recorder.actions)
+        assert total == pytest.approx(returns[i], rel=1e-9)
 
 
 def test_the_oracle_refuses_bad_settings():
