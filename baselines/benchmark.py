@@ -55,7 +55,9 @@ class Plan:
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
 OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's methods (torchrl: the offline extra)
-OFFLINE_STEPS = {"bc": 5_000, "td3bc": 10_000}         # gradient steps: each method's loss is flat by then (docs/datasets.md)
+# gradient steps: what two cores afford for 36 learners in under an hour; TD3+BC's paper trains 1M, so its rows
+# here are short-budget ones (docs/datasets.md says so beside them)
+OFFLINE_STEPS = {"bc": 5_000, "td3bc": 10_000}
 OFFLINE_AGENTS = tuple(f"{method}-{kind}" for method in OFFLINE_METHODS for kind in KINDS)   # bc-expert: BC on expert-v0
 AGENTS = (*ALGOS, TORCH_PPO, *OFFLINE_AGENTS)
 QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
