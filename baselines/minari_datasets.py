@@ -36,7 +36,7 @@ import gymnasium as gym
 import numpy as np
 
 import softenv
-from softenv._cache import cache_dir, cache_key
+from softenv._cache import cached
 from softenv._progress import progress
 from softenv._validation import check_int
 from softenv.bench.timing import code_revision
@@ -250,19 +250,21 @@ def reference_returns(scene: str, episodes: int = REFERENCE_EPISODES) -> tuple[f
     """Mean return of no force and of the trajectory oracle on the protocol's first ``episodes`` test
     episodes (cached: the oracle plans every episode)."""
     seeds = episode_seeds(episodes)
-    path = cache_dir() / (cache_key("references", {"scene": scene, "config": scene_config(scene), "seeds": seeds,
-                                                   "oracle": TrajectoryOracle.VERSION}) + ".json")
-    if path.exists():
-        found = json.loads(path.read_text())
-        return float(found["zero"]), float(found["oracle"])
-    world = World(scene_config(scene))
-    zero = evaluate(ZeroPolicy(world), scene, episodes, seeds).values["return"]
-    planner = TrajectoryOracle(scene)
-    planner.plan(make_baseline("expert", world), episodes, seeds)
-    oracle = evaluate(planner, scene, episodes, seeds).values["return"]
-    out = {"zero": float(zero.mean()), "oracle": float(oracle.mean())}
-    path.write_text(json.dumps(out))
-    return out["zero"], out["oracle"]
+
+    def build() -> tuple[float, float]:
+        world = World(scene_config(scene))
+        zero = evaluate(ZeroPolicy(world), scene, episodes, seeds).values["return"]
+        planner = TrajectoryOracle(scene)
+        planner.plan(make_baseline("expert", world), episodes, seeds)
+        return float(zero.mean()), float(evaluate(planner, scene, episodes, seeds).values["return"].mean())
+
+    def load(path: Path) -> tuple[float, float]:
+        with np.load(path, allow_pickle=False) as data:
+            return float(data["zero"]), float(data["oracle"])
+
+    return cached("references", {"scene": scene, "config": scene_config(scene), "seeds": seeds,
+                                 "oracle": TrajectoryOracle.VERSION}, build, load,
+                  lambda value, path: np.savez(path, zero=value[0], oracle=value[1]))
 
 
 # -- making and reading -----------------------------------------------------------------------------
