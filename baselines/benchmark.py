@@ -60,6 +60,12 @@ OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's 
 OFFLINE_STEPS = {"bc": 5_000, "td3bc": 10_000}
 OFFLINE_AGENTS = tuple(f"{method}-{kind}" for method in OFFLINE_METHODS for kind in KINDS)   # bc-expert: BC on expert-v0
 AGENTS = (*ALGOS, TORCH_PPO, *OFFLINE_AGENTS)
+
+
+def offline_parts(agent: str) -> tuple[str, str]:
+    """An offline agent's method and dataset kind (``bc-expert``: ``bc``, ``expert``)."""
+    method, _, kind = agent.partition("-")
+    return method, kind
 QUICK_SCENES = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 FIVE_SEEDS = ("SoftSphere-v0", "SoftSphereHaptic-v0")
 
@@ -179,13 +185,15 @@ def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: in
     from . import offline                                   # torch and torchrl: the offline extra
 
     _torch_single_thread()
-    method, _, kind = algo.partition("-")
+    method, kind = offline_parts(algo)
     args = offline.OfflineArgs(method=method, steps=budget or OFFLINE_STEPS[method])
     meta = {"scene": scene, "dataset": dataset_id(scene, kind), "dataset_episodes": dataset_episodes, "seed": seed}
     path = Path(run_dir) / "actor.pt"
     try:
         actor, _ = offline.load(path, meta | {"args": asdict(args)})
     except ValueError:                                      # none yet, of other settings, or damaged: train it
+        # ensure_datasets made it before the jobs; a worker whose store lacks it (another machine) makes it
+        # with the agent runs of run_dir's runs folder
         dataset = load_or_make(scene, kind, dataset_episodes, Path(run_dir).parent.parent)
         actor = offline.train(dataset, args, seed, log=lambda line: None)
         offline.save(actor, args, meta, path)
@@ -196,7 +204,7 @@ def ensure_datasets(plan: Plan, runs_dir: Path, echo: Callable[[str], None]) -> 
     """Make, before any job runs, each dataset the plan's offline agents train on that Minari's local
     store lacks (two workers never make one together)."""
     for scene in plan.scenes:
-        for kind in dict.fromkeys(a.partition("-")[2] for a in plan.agents if a in OFFLINE_AGENTS):
+        for kind in dict.fromkeys(offline_parts(a)[1] for a in plan.agents if a in OFFLINE_AGENTS):
             load_or_make(scene, kind, plan.dataset_episodes, runs_dir, echo)
 
 
@@ -302,15 +310,14 @@ def agent_budget(plan: Plan, algo: str, scene: str) -> int:
     if given:
         return given
     if algo in OFFLINE_AGENTS:
-        return OFFLINE_STEPS[algo.partition("-")[0]]
+        return OFFLINE_STEPS[offline_parts(algo)[0]]
     return _torch_ppo_budget() if algo == TORCH_PPO else int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
 
 
 def _agent_kind(plan: Plan, algo: str, scene: str) -> str:
     steps = agent_budget(plan, algo, scene)
     if algo in OFFLINE_AGENTS:
-        kind = algo.partition("-")[2]
-        return f"offline ({steps:,} gradient steps on {kind}-v0, {plan.dataset_episodes} episodes)"
+        return f"offline ({steps:,} gradient steps on {offline_parts(algo)[1]}-v0, {plan.dataset_episodes} episodes)"
     return f"agent ({steps:,} steps" + (f", torch on {torch_device()})" if algo == TORCH_PPO else ")")
 
 

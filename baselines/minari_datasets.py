@@ -9,7 +9,7 @@ so every episode replays bit for bit through ``dataset.recover_environment()`` f
 | kind | demonstrator |
 |---|---|
 | ``expert`` | the scripted expert (the benchmark's ``expert`` baseline: the device model inverted) |
-| ``oracle`` | the trajectory oracle (CEM through the device, planned per episode on its training target) |
+| ``oracle`` | the trajectory oracle (CEM through the device, planned per episode on its training target, replayed) |
 | ``novice`` | the expert's hand path degraded to the published novice profile (:mod:`softenv.training.profiles`) |
 | ``mixed`` | a skills lab's day: expert, intermediate and novice episodes in turn |
 | ``random`` | uniform actions |
@@ -48,9 +48,9 @@ from softenv.training.scoring import replay_hand
 from softenv.training.trainee import degrade, expert_hand_log
 
 from .agents import hyperparams, load_agent, train_agent
-from .anchors import scene_config
+from .anchors import compute_anchors, oracle_of, scene_config
 from .evaluate import EPISODES, SCENES, TRAIN_SPLIT, device_kind, episode_seeds, evaluate, scene_kwargs
-from .planner import TrajectoryOracle
+from .planner import ReplayPolicy, TrajectoryOracle
 from .policies import Policy, RandomPolicy, ZeroPolicy, make_baseline
 
 NAMESPACE = "softenv"
@@ -103,22 +103,6 @@ class PolicyDemonstrator:
     def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
         assert self.policy is not None, "begin() first"
         return np.asarray(self.policy.predict(obs[None]), dtype=np.float32)[0]
-
-
-class PlannedDemonstrator:
-    """Plays each episode's planned actions (the trajectory oracle's, planned beforehand by seed)."""
-
-    def __init__(self, plans: dict[int, np.ndarray], name: str) -> None:
-        self.plans, self.name = plans, name
-        self._actions, self._t = np.zeros((1, 4), np.float32), 0
-
-    def begin(self, seed: int) -> None:
-        self._actions, self._t = self.plans[seed], 0
-
-    def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
-        action = self._actions[min(self._t, len(self._actions) - 1)]
-        self._t += 1
-        return action
 
 
 class TraineeDemonstrator:
@@ -220,11 +204,10 @@ def source(scene: str, kind: str, seeds: list[int], runs_dir: Path, agent_steps:
         planner = TrajectoryOracle(scene)
         echo(f"{dataset_id(scene, kind)}: planning {len(seeds)} episodes with the trajectory oracle")
         planner.plan(make_baseline("expert", world), len(seeds), list(seeds), task={"split": TRAIN_SPLIT})
-        return Source(PlannedDemonstrator(dict(zip(seeds, planner.actions)), "oracle"),
+        plans = dict(zip(seeds, planner.actions))
+        return Source(PolicyDemonstrator(lambda seed: ReplayPolicy(plans[seed][None], "oracle"), "oracle"),
                       f"trajectory oracle v{TrajectoryOracle.VERSION} (CEM through the device)",
-                      {"oracle_settings": {"candidates": planner.candidates, "iterations": planner.iterations,
-                                           "elites": planner.elites, "knot_every": planner.knot_every,
-                                           "sigma": planner.sigma, "seed": planner.seed}})
+                      {"oracle": oracle_of(scene)})
     if kind in ("novice", "mixed"):
         amounts = trainee_amounts(scene)
         names = MIXED if kind == "mixed" else ("novice",)
@@ -254,9 +237,9 @@ def reference_returns(scene: str, episodes: int = REFERENCE_EPISODES) -> tuple[f
     def build() -> tuple[float, float]:
         world = World(scene_config(scene))
         zero = evaluate(ZeroPolicy(world), scene, episodes, seeds).values["return"]
-        planner = TrajectoryOracle(scene)
-        planner.plan(make_baseline("expert", world), episodes, seeds)
-        return float(zero.mean()), float(evaluate(planner, scene, episodes, seeds).values["return"].mean())
+        _, _, planned = compute_anchors(scene, seeds)            # the oracle the anchors plan, with its episodes
+        assert planned is not None, "a laryngoscope scene's oracle plans"
+        return float(zero.mean()), float(planned.values["return"].mean())
 
     def load(path: Path) -> tuple[float, float]:
         with np.load(path, allow_pickle=False) as data:

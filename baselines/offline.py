@@ -29,6 +29,7 @@ from torchrl.modules import MLP, Actor, ValueOperator
 from torchrl.objectives import BCLoss, SoftUpdate, TD3BCLoss
 
 from softenv._artifact import atomic_write
+from softenv._validation import check_choice, check_int, check_real
 
 METHODS = ("bc", "td3bc")
 MODEL_FORMAT = "softenv-offline"
@@ -53,12 +54,14 @@ class OfflineArgs:
     policy_delay: int = 2
 
     def check(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"method={self.method!r}: valid offline methods are {list(METHODS)}")
-        for name, low in (("steps", 1), ("batch_size", 1), ("hidden", 1), ("policy_delay", 1)):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < low:
-                raise ValueError(f"{name}={value!r}: must be an integer >= {low}")
+        check_choice(self.method, "method", METHODS)
+        for name in ("steps", "batch_size", "hidden", "policy_delay"):
+            check_int(getattr(self, name), name, 1)
+        check_real(self.lr, "lr", 0.0, 1.0, low_open=True)
+        check_real(self.gamma, "gamma", 0.0, 1.0)
+        check_real(self.tau, "tau", 0.0, 1.0, low_open=True)
+        for name in ("alpha", "policy_noise", "noise_clip"):
+            check_real(getattr(self, name), name, 0.0)
 
 
 def transitions(dataset: Any) -> TensorDict:
