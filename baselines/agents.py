@@ -135,12 +135,15 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     eval_env = make_training_env(algo, scene, min(eval_episodes, 10), split="test")
     callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
                             log_path=str(partial / "eval"), best_model_save_path=str(partial / "best"), verbose=0)
-    model.learn(budget, callback=callback, progress_bar=progress and _has_progress_bar())
+    try:
+        model.learn(budget, callback=callback, progress_bar=progress and _has_progress_bar())
+    finally:                                     # the logger's files too: an open progress.csv outlived its run
+        model.logger.close()
+        env.close()
+        eval_env.close()
     model.save(partial / "model.zip")
     meta = {**wanted, "model_sha256": _sha256(partial / "model.zip")}
     (partial / "agent.json").write_text(json.dumps(meta, indent=2))
-    env.close()
-    eval_env.close()
     if out.exists():
         shutil.rmtree(out)                       # a run of other settings, or one not reused
     os.replace(partial, out)                     # the whole run appears at once
