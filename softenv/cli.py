@@ -219,6 +219,7 @@ def cmd_score(args: argparse.Namespace) -> None:
         scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"}}
     path = example_log(args.example) if args.example else Path(args.trajectory)
     typed = " ".join(f"--{name} {value}" for name, value in (("scene", args.scene), ("law", args.law)) if value)
+    store = open_store(args)                # before the replay: a bad --store or --trainee is refused first
     report = score_file(path, scene, args.out, scene_named=typed or None)
     m = report["metrics"]
     ttt = "never" if m["time_to_target_s"] is None else f"{m['time_to_target_s']:.2f} s"
@@ -228,6 +229,73 @@ def cmd_score(args: argparse.Namespace) -> None:
           + (f", peak incisor force {m['clinical']['peak_incisor_force_N']:.1f} N" if "clinical" in m else "")))
     if args.out:
         print(printable(f"wrote {args.out}/{path.stem}_score.json, .md, .png"))
+    if store is not None:
+        with store:
+            keep_session(store, path, args.trainee, "score", scene, typed or None)
+
+
+def _need_lab(what: str) -> None:
+    missing = [m for m in ("sqlalchemy", "alembic", "starlette", "uvicorn", "asgi_csrf", "matplotlib")
+               if importlib.util.find_spec(m) is None]
+    if missing:
+        raise ValueError(f"{what} needs the lab extra ({', '.join(missing)} missing): pip install 'softenv[lab]'")
+
+
+def open_store(args: argparse.Namespace) -> Any:
+    """The session store ``--store`` names (the lab extra), or None when no ``--trainee`` asks to keep the session."""
+    if args.trainee is None:
+        if args.store is not None:
+            raise ValueError("--store keeps a session for a trainee: give --trainee ID too")
+        return None
+    _need_lab("keeping sessions (--trainee)")
+    from .skills.store import DEFAULT_STORE, Store, check_trainee        # the lab extra
+
+    check_trainee(args.trainee)
+    return Store(args.store or DEFAULT_STORE)
+
+
+def keep_session(store: Any, path: Path, trainee: str, source: str, scene: dict[str, Any] | None = None,
+                 scene_named: str | None = None) -> None:
+    kept = store.add(path, trainee, scene=scene, scene_named=scene_named, source=source)
+    print(printable(f"kept as session {kept.id} of trainee {trainee} in {store.url}"))
+
+
+def cmd_serve(args: argparse.Namespace) -> None:
+    _need_lab("softenv serve")
+    import shutil
+    import secrets
+    import tempfile
+
+    import uvicorn                                                   # the lab extra
+    from .skills import cohort, web                                  # the lab extra
+    from .skills.store import Store                                  # the lab extra
+    from ._progress import Progress
+
+    with tempfile.TemporaryDirectory(prefix="softenv-serve-") as folder:
+        if args.demo:
+            bars: dict[str, Progress] = {}
+
+            def shown(stage: str, done: int, total: int) -> None:
+                if stage not in bars:
+                    bars[stage] = Progress(total, f"demo cohort: {stage}").__enter__()
+                bars[stage].advance(done - bars[stage].done)
+                if done == total:
+                    bars[stage].__exit__()
+
+            demo = cohort.demo_store(progress=shown)
+            location: str | Path = Path(folder) / "demo.sqlite"      # a copy: the cached cohort stays as built
+            shutil.copyfile(demo, location)
+        else:
+            location = args.store
+        store = Store(location)
+        token = args.token or (None if web.is_loopback(args.host) else secrets.token_urlsafe(18))
+        address = f"http://{'[' + args.host + ']' if ':' in args.host else args.host}:{args.port}/"
+        print(printable(f"softenv serve: the skills lab at {address}{'?token=' + token if token else ''} "
+                        f"(store {store.url}{', the demo cohort' if args.demo else ''}); Ctrl-C stops it"), flush=True)
+        try:
+            uvicorn.run(web.make_app(store, token), host=args.host, port=args.port, log_level="warning")
+        finally:
+            store.close()
 
 
 def load_policy(spec: str) -> Any:
@@ -298,6 +366,7 @@ def cmd_play(args: argparse.Namespace) -> None:
                          "on a desktop, or pass --headless for a session without a window")
     if args.bridge is not None and args.device != "keys":
         raise ValueError(f"--bridge and --device {args.device} both drive the hand: give one")
+    store = open_store(args)                         # before the session, for the same reason
     bridge = device = None
     if args.bridge is not None:
         bridge = play.open_bridge(*args.bridge)
@@ -306,9 +375,11 @@ def cmd_play(args: argparse.Namespace) -> None:
     elif args.device != "keys":
         device = play.open_haptic_device(args.device)
     try:
-        play.run(args.seconds, args.out, bridge=bridge, device=device, screens=not args.headless)
+        session = play.run(args.seconds, args.out, bridge=bridge, device=device, screens=not args.headless)
+        if store is not None:
+            keep_session(store, session.log_path, args.trainee, "play")
     finally:
-        for opened in (bridge, device):
+        for opened in (bridge, device, store):
             if opened is not None:
                 opened.close()
 
@@ -447,6 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--bridge", type=_bridge_address, metavar="[HOST:]PORT",
                    help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")
+    store_args(p)
 
     p = sub.add_parser("evaluate", help="score a policy of yours under the benchmark's protocol (normalized score with "
                                         "95 %% intervals; --out writes a leaderboard result)")
@@ -487,7 +559,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="tissue law of the replay: linear or stiffening (as --scene: the log's own if it records "
                         "one; else linear unless given)")
     p.add_argument("--out", help="write <name>_score.json, .md and .png here")
+    store_args(p)
+
+    p = sub.add_parser("serve", help="the skills lab's dashboard in the browser: the cohort, trainees, sessions, "
+                       "uploads, pass marks (the lab extra)")
+    p.add_argument("--store", default="skills.sqlite", help="the session store: a SQLite file or a database URL "
+                   "(postgresql+psycopg://user:password@host/db); default skills.sqlite")
+    p.add_argument("--demo", action="store_true", help="serve a demo cohort (12 synthetic trainees, 10 sessions each; "
+                   "built into the cache on first use, about a minute) instead of --store")
+    p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1, this machine "
+                   "only; any other address requires the token)")
+    p.add_argument("--port", type=_bounded(int, 1, 65535), default=8000, help="the port (default 8000)")
+    p.add_argument("--token", help="the token every request must carry (default: none on a loopback address, a "
+                   "random one printed at start on any other)")
     return parser
+
+
+def store_args(p: argparse.ArgumentParser) -> None:
+    """--trainee and --store: keep the scored session in a skills-lab store (the lab extra)."""
+    p.add_argument("--trainee", help="keep the scored session for this trainee (a pseudonymous id such as T-017) in "
+                   "the session store")
+    p.add_argument("--store", help="the session store --trainee keeps it in: a SQLite file or a database URL "
+                   "(default skills.sqlite)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -531,6 +624,8 @@ def _dispatch(args: argparse.Namespace, argv: list[str]) -> int:
         cmd_score(args)
     elif args.command == "play":
         cmd_play(args)
+    elif args.command == "serve":
+        cmd_serve(args)
     return 0
 
 

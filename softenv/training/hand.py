@@ -31,12 +31,12 @@ def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
     return config
 
 
-def haptic_env(scene: dict[str, Any] | None, horizon: int) -> Any:
+def haptic_env(scene: dict[str, Any] | None, horizon: int, render_mode: str | None = None) -> Any:
     """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
     haptic_config(scene)                              # the laryngoscope's scene, or a refusal naming device.kind
     scene = scene_sections(scene)
     scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
-    return SoftSphereEnv(base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
+    return SoftSphereEnv(render_mode=render_mode, base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
 
 
 def relative_hand_pose(env: Any) -> np.ndarray:

@@ -41,9 +41,11 @@ SCREEN_FPS = 30.0                     # the start and end screens' redraw rate i
 
 @dataclass
 class Session:
-    """What a session leaves: the device log, the live episode's last info, the score report."""
+    """What a session leaves: the device log (and where it was written), the live episode's last info, the
+    score report."""
 
     log: np.ndarray
+    log_path: Path
     live_final_error_mm: float
     live_clinical: dict[str, float]
     report: dict[str, Any] = field(default_factory=dict)
@@ -160,7 +162,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
             hand.close()
     finally:
         pygame.quit()
-    return Session(log, float(info.get("shape_error_mm", math.nan)), live, report)
+    return Session(log, path, float(info.get("shape_error_mm", math.nan)), live, report)
 
 
 def _start_screen(pygame: Any, view: PlayView, env: Any, next_events: Callable[[], list[Any]],

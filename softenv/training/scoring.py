@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
-from .._validation import check_choice, check_real, printable
+from .._validation import check_choice, check_int, check_real, printable
 from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..envs.single import SoftSphereEnv
@@ -44,6 +44,9 @@ from .trainee import expert_hand_log
 
 COLUMNS = FORCE_LOG.columns
 INCISOR_LIMIT_N = 10.0
+# the formulas' version: bump it when a weight, a term or the expert changes, so that stored scores
+# (softenv.skills) can be told apart and rescored from their raw logs
+SCORE_VERSION = 1
 # the score's parts: weights and definitions (force-command logs; hand-pose logs)
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
 HAND_WEIGHTS = {"accuracy": 0.3, "speed": 0.15, "safety": 0.15, "teeth": 0.15, "smoothness": 0.1, "view": 0.15}
@@ -114,6 +117,7 @@ class Replay:
     jerk_rms: float
     incisor_N: np.ndarray | None = None
     clinical: dict[str, float] = field(default_factory=dict)
+    frames: list[np.ndarray] = field(default_factory=list)     # rendered views, when asked for
 
 
 def load_trajectory(path: str | Path) -> np.ndarray:
@@ -134,11 +138,13 @@ def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") ->
         "sideways_N": (-dev["max_sideways_force"], dev["max_sideways_force"])}, source)
 
 
-def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
+def replay(table: np.ndarray, scene: dict[str, Any] | None = None, frame_every: int = 0) -> Replay:
     """Replay a validated force-command log through a reach scene whose target is the family centre.
 
-    Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``.
+    Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``. With
+    ``frame_every`` > 0, the scene's view is rendered every that many steps (and after the last) into ``frames``.
     """
+    check_int(frame_every, "frame_every", 0)
     table = check_trajectory(table).copy()
     table[:, 0] -= table[0, 0]                       # time counts from the first row
     config = make_config(**scene_sections(scene))
@@ -148,19 +154,27 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None) -> Replay:
     rows = np.clip(np.searchsorted(table[:, 0], times - dt, side="right") - 1, 0, len(table) - 1)
     sections = scene_sections(scene)
     overrides = {**sections, "task": {**sections.get("task", {}), "kind": "reach", "horizon": len(times)}}
-    env = SoftSphereEnv(**overrides)
+    env = SoftSphereEnv(render_mode="rgb_array" if frame_every else None, **overrides)
     world = env.world
     features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
     # ranges are checked above, so the clip only removes rounding at the box's faces
     actions = np.clip(world.force_box.normalised(features), -1.0, 1.0).astype(np.float32)
     env.reset(seed=0, options={"target": _family_centre(world)})
     error, force = np.empty(len(times)), np.empty(len(times))
+    frames: list[np.ndarray] = []
     for i, a in enumerate(actions):
         _, _, _, _, info = env.step(a)
         error[i], force[i] = info["shape_error_mm"], info["force_N"]
+        _keep_frame(env, i, len(times), frame_every, frames)
     applied = world.force_box.features(actions.astype(np.float64))[:, 2:]
     jerk = np.diff(applied, n=3, axis=0) / dt ** 3 if len(applied) > 3 else np.zeros((1, 2))
-    return _replay(env, times, error, force, float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))))
+    return _replay(env, times, error, force, float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1)))), frames=frames)
+
+
+def _keep_frame(env: Any, step: int, steps: int, every: int, frames: list[np.ndarray]) -> None:
+    """Render the env's view into ``frames`` every ``every`` steps and after the last (0: never)."""
+    if every and (step % every == 0 or step == steps - 1):
+        frames.append(env.render())
 
 
 def _family_centre(world: Any) -> np.ndarray:
@@ -177,19 +191,23 @@ def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, j
                   float(force.max()), float(force.mean()), float(force.sum() * dt), jerk_rms, **extra)
 
 
-def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory") -> Replay:
+def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory",
+                frame_every: int = 0) -> Replay:
     """Replay a hand-pose log through the laryngoscope and tongue (SoftSphereHaptic-v0's scene with
     ``scene``'s sections) toward the family centre: each control period the hand is commanded the
     velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
-    accumulates)."""
+    accumulates). ``frame_every``: as for :func:`replay` (the view has the side view beside the tongue)."""
+    check_int(frame_every, "frame_every", 0)
     times, poses = hand_actions(table, scene, source)
-    env = haptic_env(scene, len(times))
+    env = haptic_env(scene, len(times), render_mode="rgb_array" if frame_every else None)
     env.reset(seed=0, options={"target": _family_centre(env.world)})
     error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
+    frames: list[np.ndarray] = []
     for k in range(len(times)):                       # the log's own moves passed at 1e-6: 1e-3 is rounding
         _, _, _, _, info = env.step(action_toward(env, poses[k + 1]))
         error[k], force[k], incisor[k] = info["shape_error_mm"], info["tongue_force_N"], info["incisor_force_N"]
-    return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"])
+        _keep_frame(env, k, len(times), frame_every, frames)
+    return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"], frames=frames)
 
 
 def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5.0, style: str = "expert") -> np.ndarray:
@@ -317,7 +335,7 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
         trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
         parts, expert_parts = score(trainee, expert, safe_force), score(expert, expert, safe_force)
         formula, weights = FORMULA, WEIGHTS
-    report = {"trajectory": printable(str(path)), "log": schema.name, "scene": scene, "scene_from": scene_from, **parts,
+    report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": scene, "scene_from": scene_from, **parts,
               "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,
               "points_to_gain": points_to_gain(parts, expert_parts, weights),
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
@@ -334,7 +352,7 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
 
 
 def _summary(r: Replay) -> dict[str, Any]:
-    out = {k: v for k, v in asdict(r).items() if not isinstance(v, (np.ndarray, dict)) and v is not None
+    out = {k: v for k, v in asdict(r).items() if not isinstance(v, (np.ndarray, dict, list)) and v is not None
            or k == "time_to_target_s"}
     if math.isnan(out["jerk_rms"]):
         del out["jerk_rms"]                                     # a hand log's smoothness is SPARC (clinical)

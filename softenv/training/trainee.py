@@ -33,6 +33,8 @@ from .logs import HAND_LOG, Schema, check_table
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
 LEVER_FULL_RAD, LEVER_RISE_M = 0.3, 0.005   # from this lever on, the hand no longer presses down but rises
+# the largest amount of each error degrade() takes
+LIMITS = {"tremor": 5.0, "hesitation": 60.0, "lever": 0.5, "overshoot": 50.0, "direction": 1.0}
 
 
 def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0) -> np.ndarray:
@@ -68,9 +70,9 @@ def withdrawn(log: np.ndarray, schema: Schema = HAND_LOG, settle_s: float = 0.5)
 def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
             lever: float = 0.0, overshoot: float = 0.0, direction: float = 0.0, seed: int = 0) -> np.ndarray:
     """The hand log ``log`` with a trainee's errors (see the module docstring; amounts >= 0)."""
-    for name, value, high in (("tremor", tremor, 5.0), ("hesitation", hesitation, 60.0), ("lever", lever, 0.5),
-                              ("overshoot", overshoot, 50.0), ("direction", direction, 1.0)):
-        check_real(value, name, 0.0, high)
+    amounts = {"tremor": tremor, "hesitation": hesitation, "lever": lever, "overshoot": overshoot, "direction": direction}
+    for name, value in amounts.items():
+        check_real(value, name, 0.0, LIMITS[name])
     check_int(seed, "seed", 0, 2**32 - 1)
     log = check_table(log, HAND_LOG, "log").copy()
     t: np.ndarray = log[:, 0] - log[0, 0]                  # the log's own clock does not matter
