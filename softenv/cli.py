@@ -234,9 +234,12 @@ def cmd_score(args: argparse.Namespace) -> None:
             keep_session(store, path, args.trainee, "score", scene, typed or None)
 
 
-def _need_lab(what: str) -> None:
-    missing = [m for m in ("sqlalchemy", "alembic", "starlette", "uvicorn", "asgi_csrf", "matplotlib")
-               if importlib.util.find_spec(m) is None]
+STORE_MODULES = ("sqlalchemy", "alembic")
+DASHBOARD_MODULES = (*STORE_MODULES, "starlette", "starlette_csrf", "uvicorn", "multipart", "jinja2", "matplotlib")
+
+
+def _need_lab(what: str, modules: tuple[str, ...] = DASHBOARD_MODULES) -> None:
+    missing = [m for m in modules if importlib.util.find_spec(m) is None]
     if missing:
         raise ValueError(f"{what} needs the lab extra ({', '.join(missing)} missing): pip install 'softenv[lab]'")
 
@@ -247,7 +250,7 @@ def open_store(args: argparse.Namespace) -> Any:
         if args.store is not None:
             raise ValueError("--store keeps a session for a trainee: give --trainee ID too")
         return None
-    _need_lab("keeping sessions (--trainee)")
+    _need_lab("keeping sessions (--trainee)", STORE_MODULES)
     from .skills.store import DEFAULT_STORE, Store, check_trainee        # the lab extra
 
     check_trainee(args.trainee)
