@@ -10,8 +10,11 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
+import secrets
+import shutil
 import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable, NoReturn
@@ -29,6 +32,7 @@ from .parallel import Interrupted, Job, run_jobs, stop_on_signals, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
 from .shape_model import ShapeModel
 from ._artifact import check_out_dir
+from ._progress import Progress
 from ._validation import check_int, check_real, printable
 from .training import play
 from .training.bridge import LOOPBACK
@@ -265,14 +269,10 @@ def keep_session(store: Any, path: Path, trainee: str, source: str, scene: dict[
 
 def cmd_serve(args: argparse.Namespace) -> None:
     _need_lab("softenv serve")
-    import shutil
-    import secrets
-    import tempfile
-
     import uvicorn                                                   # the lab extra
-    from .skills import cohort, web                                  # the lab extra
+    from .skills.cohort import demo_store                            # the lab extra
+    from .skills.web import is_loopback, make_app                    # the lab extra
     from .skills.store import Store                                  # the lab extra
-    from ._progress import Progress
 
     with tempfile.TemporaryDirectory(prefix="softenv-serve-") as folder:
         if args.demo:
@@ -285,18 +285,18 @@ def cmd_serve(args: argparse.Namespace) -> None:
                 if done == total:
                     bars[stage].__exit__()
 
-            demo = cohort.demo_store(progress=shown)
+            demo = demo_store(progress=shown)
             location: str | Path = Path(folder) / "demo.sqlite"      # a copy: the cached cohort stays as built
             shutil.copyfile(demo, location)
         else:
             location = args.store
         store = Store(location)
-        token = args.token or (None if web.is_loopback(args.host) else secrets.token_urlsafe(18))
+        token = args.token or (None if is_loopback(args.host) else secrets.token_urlsafe(18))
         address = f"http://{'[' + args.host + ']' if ':' in args.host else args.host}:{args.port}/"
         print(printable(f"softenv serve: the skills lab at {address}{'?token=' + token if token else ''} "
                         f"(store {store.url}{', the demo cohort' if args.demo else ''}); Ctrl-C stops it"), flush=True)
         try:
-            uvicorn.run(web.make_app(store, token), host=args.host, port=args.port, log_level="warning")
+            uvicorn.run(make_app(store, token), host=args.host, port=args.port, log_level="warning")
         finally:
             store.close()
 

@@ -22,7 +22,7 @@ from softenv.cli import main
 from softenv.skills import schema
 from softenv.skills.store import Store, database_url, head_revision, scene_name, upgrade
 from softenv.training import scoring
-from softenv.training.logs import HAND_LOG, example_log, read_log, save_log
+from softenv.training.logs import HAND_LOG, example_log, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
 ROOT = Path(__file__).resolve().parents[1]
