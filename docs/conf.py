@@ -76,6 +76,10 @@ API = {
                                       "softenv.baselines.offline.train", "softenv.baselines.offline.OfflineArgs",
                                       "softenv.baselines.offline.OfflinePolicy", "softenv.baselines.offline.save",
                                       "softenv.baselines.offline.load"],
+    "Skills lab": ["softenv.skills.store.Store", "softenv.skills.store.StoredSession",
+                   "softenv.skills.store.TraineeSummary", "softenv.skills.passmark.contrasting_groups",
+                   "softenv.skills.passmark.crossing", "softenv.skills.passmark.PassMark",
+                   "softenv.skills.cohort.build", "softenv.skills.cohort.demo_store", "softenv.skills.web.make_app"],
 }
 
 

@@ -32,7 +32,9 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     assert {n.split("/")[0] for n in names} == {"softenv", wheel.name.split("-")[0] + "-" + wheel.name.split("-")[1] +
                                                  ".dist-info"}, "the wheel installs a top-level name besides softenv"
     for data in ("softenv/baselines/hyperparams/ppo.yml", "softenv/baselines/shipped_anchors/SoftSphereHaptic-v0.json",
-                 "softenv/training/examples/device_logs/expert.csv", "softenv/fem/shipped/SoftSphere-v0.npz"):
+                 "softenv/training/examples/device_logs/expert.csv", "softenv/fem/shipped/SoftSphere-v0.npz",
+                 "softenv/skills/templates/cohort.html", "softenv/skills/migrations/env.py",
+                 "softenv/skills/migrations/versions/v0002_pass_marks.py"):
         assert data in names
 
     venv = tmp_path / "venv"
@@ -41,7 +43,7 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     env = {key: value for key, value in os.environ.items() if key not in ("VIRTUAL_ENV", "PYTHONPATH")}
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env['PATH']}"
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
-    run([python, "-m", "pip", "install", "-q", "-c", str(ROOT / "constraints.txt"), f"{wheel}[all,play,offline]"], tmp_path, env,
+    run([python, "-m", "pip", "install", "-q", "-c", str(ROOT / "constraints.txt"), f"{wheel}[all,play,offline,lab]"], tmp_path, env,
         timeout=1200)
 
     work = tmp_path / "empty"
@@ -57,6 +59,11 @@ def test_the_wheel_runs_every_command_outside_the_repository(tmp_path):
     assert "score" in run([softenv, "score", "--example", "device_logs/levers_on_teeth", "--out", "scored"], work, env)
     assert (work / "scored" / "levers_on_teeth_score.md").exists()
     run([softenv, "score", "--example", "trajectories/expert"], work, env)
+    # the skills lab: the store migrates from the wheel's migrations, the dashboard's pages load
+    kept = run([softenv, "score", "--example", "device_logs/expert", "--trainee", "T-1", "--store", "lab.sqlite"], work, env)
+    assert "kept as session 1 of trainee T-1" in kept
+    run([python, "-c", "from softenv.skills.web import TEMPLATES; [TEMPLATES.get_template(p) for p in "
+         "('cohort.html', 'trainee.html', 'session.html', 'upload.html', 'job.html', 'passmarks.html')]"], work, env)
     run([softenv, "bench", "--quick", "--only", "decode", "--out", "bench"], work, env)
     run([softenv, "play", "--headless", "--seconds", "0.5", "--out", "play"], work, env)
     (work / "still.py").write_text(POLICY)
