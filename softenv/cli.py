@@ -279,11 +279,10 @@ def cmd_serve(args: argparse.Namespace) -> None:
             bars: dict[str, Progress] = {}
 
             def shown(stage: str, done: int, total: int) -> None:
-                if stage not in bars:
-                    bars[stage] = Progress(total, f"demo cohort: {stage}").__enter__()
-                bars[stage].advance(done - bars[stage].done)
+                bar = bars.setdefault(stage, Progress(total, f"demo cohort: {stage}"))
+                bar.advance(done - bar.done)
                 if done == total:
-                    bars[stage].__exit__()
+                    bar.__exit__()                                 # ends the bar's line
 
             demo = demo_store(progress=shown)
             location: str | Path = Path(folder) / "demo.sqlite"      # a copy: the cached cohort stays as built

@@ -31,8 +31,8 @@ from .._cache import cache_dir
 from .._validation import check_int
 from ..training import scoring
 from ..training.logs import HAND_LOG, save_log
-from ..training.trainee import LIMITS, degrade, expert_hand_log
-from .passmark import BASELINE, contrasting_groups, profile_amounts
+from ..training.trainee import degrade, expert_hand_log
+from .passmark import contrasting_groups, profile_amounts, with_baseline
 from .store import Store, scene_name
 
 STARTING_PROFILES = ("novice", "novice (time)", "novice (force)", "intermediate")
@@ -53,10 +53,8 @@ def plan(trainees: int = 12, sessions: int = 10, seed: int = 0) -> list[tuple[st
         alpha = rng.uniform(0.8, 1.6)
         offset = timedelta(hours=int(rng.integers(0, 8)), days=int(rng.integers(0, 5)))
         for n in range(1, sessions + 1):
-            amounts = {k: v * n ** -alpha * rng.lognormal(0.0, SESSION_SPREAD) for k, v in first.items()}
-            for k, most in BASELINE.items():
-                amounts[k] = amounts.get(k, 0.0) + float(rng.uniform(0.0, most))
-            amounts = {k: float(min(v, LIMITS[k])) for k, v in amounts.items()}
+            amounts = with_baseline({k: v * n ** -alpha * rng.lognormal(0.0, SESSION_SPREAD) for k, v in first.items()},
+                                    rng)
             when = FIRST_SESSION + offset + timedelta(weeks=n - 1)
             out.append((f"T-{t + 1:02d}", profile, n, when, amounts, int(rng.integers(1 << 31))))
     return out

@@ -97,12 +97,18 @@ def group_amounts(profile: dict[str, float], n: int, seed: int) -> list[tuple[di
     rng = np.random.default_rng(seed)
     members = []
     for _ in range(n):
-        amounts = {k: float(v * rng.uniform(0.5, 1.5)) for k, v in profile.items()}
-        for k, most in BASELINE.items():
-            amounts[k] = amounts.get(k, 0.0) + float(rng.uniform(0.0, most))
-        amounts = {k: min(v, LIMITS[k]) for k, v in amounts.items()}
+        amounts = with_baseline({k: float(v * rng.uniform(0.5, 1.5)) for k, v in profile.items()}, rng)
         members.append((amounts, int(rng.integers(1 << 31))))
     return members
+
+
+def with_baseline(amounts: dict[str, float], rng: np.random.Generator) -> dict[str, float]:
+    """``amounts`` plus the :data:`BASELINE` tremor and hesitation anyone shows, each at most what
+    :func:`softenv.training.trainee.degrade` takes."""
+    out = dict(amounts)
+    for k, most in BASELINE.items():
+        out[k] = out.get(k, 0.0) + float(rng.uniform(0.0, most))
+    return {k: float(min(v, LIMITS[k])) for k, v in out.items()}
 
 
 def profile_amounts(name: str, scene: dict[str, Any] | None = None) -> dict[str, float]:

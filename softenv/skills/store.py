@@ -20,6 +20,7 @@ scores beside the new ones.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
@@ -316,29 +317,26 @@ class Store:
         return (sa.select(s).join(newest, (s.c.session_id == newest.c.session_id) & (s.c.formula_version == newest.c.v))
                 .subquery())
 
-    def sessions(self, trainee: str | None = None) -> list[StoredSession]:
-        """Kept sessions (one trainee's, or all), oldest first, each with its newest score."""
+    def _stored(self, where: Any = None) -> list[StoredSession]:
+        """Kept sessions matching ``where`` (all by default), oldest first, each with its newest score."""
         s, sc = schema.sessions, self._newest_scores()
         query = (sa.select(s.c.id, s.c.trainee_id, s.c.recorded_at, s.c.scene, s.c.log_kind, s.c.log_name, s.c.source,
                            s.c.softenv_version, sc.c.score, sc.c.formula_version, sc.c.report)
                  .join(sc, sc.c.session_id == s.c.id).order_by(s.c.recorded_at, s.c.id))
-        if trainee is not None:
-            query = query.where(s.c.trainee_id == trainee)
         with self.engine.connect() as conn:
-            rows = conn.execute(query).all()
+            rows = conn.execute(query if where is None else query.where(where)).all()
         return [StoredSession(r.id, r.trainee_id, _utc(r.recorded_at), r.scene, r.log_kind, r.log_name, r.source,
                               r.softenv_version, r.score, r.formula_version, r.report) for r in rows]
 
+    def sessions(self, trainee: str | None = None) -> list[StoredSession]:
+        """Kept sessions (one trainee's, or all), oldest first, each with its newest score."""
+        return self._stored(None if trainee is None else schema.sessions.c.trainee_id == trainee)
+
     def session(self, session_id: int) -> StoredSession:
-        s, sc = schema.sessions, self._newest_scores()
-        with self.engine.connect() as conn:
-            r = conn.execute(sa.select(s.c.id, s.c.trainee_id, s.c.recorded_at, s.c.scene, s.c.log_kind, s.c.log_name,
-                                       s.c.source, s.c.softenv_version, sc.c.score, sc.c.formula_version, sc.c.report)
-                             .join(sc, sc.c.session_id == s.c.id).where(s.c.id == session_id)).first()
-        if r is None:
+        found = self._stored(schema.sessions.c.id == session_id)
+        if not found:
             raise ValueError(f"session {session_id!r} is not in store {self.url}")
-        return StoredSession(r.id, r.trainee_id, _utc(r.recorded_at), r.scene, r.log_kind, r.log_name, r.source,
-                             r.softenv_version, r.score, r.formula_version, r.report)
+        return found[0]
 
     def raw_log(self, session_id: int) -> tuple[str, bytes]:
         """A session's log as it was recorded: its name and bytes."""
@@ -368,16 +366,33 @@ class Store:
             found = set(conn.execute(sa.select(schema.sessions.c.scene).distinct()).scalars())
         return sorted(found | set(self.pass_marks()))
 
-    def trainees(self) -> list[TraineeSummary]:
-        """Every trainee's standing, by id."""
+    def trainee_ids(self) -> list[str]:
+        with self.engine.connect() as conn:
+            return list(conn.execute(sa.select(schema.trainees.c.id).order_by(schema.trainees.c.id)).scalars())
+
+    def cohort(self) -> tuple[list[TraineeSummary], dict[str, list[StoredSession]], dict[str, PassMark]]:
+        """Every trainee's standing (by id), their sessions (oldest first) and the scenes' pass marks, read once."""
         with self.engine.connect() as conn:
             people = conn.execute(sa.select(schema.trainees.c.id, schema.trainees.c.name)
                                   .order_by(schema.trainees.c.id)).all()
-        by_trainee: dict[str, list[StoredSession]] = {}
+        by_trainee: dict[str, list[StoredSession]] = {p.id: [] for p in people}
         for s in self.sessions():
-            by_trainee.setdefault(s.trainee, []).append(s)
+            by_trainee[s.trainee].append(s)
         marks = self.pass_marks()
-        return [summary(p.id, p.name, by_trainee.get(p.id, []), marks) for p in people]
+        return [summary(p.id, p.name, by_trainee[p.id], marks) for p in people], by_trainee, marks
+
+    def trainees(self) -> list[TraineeSummary]:
+        """Every trainee's standing, by id."""
+        return self.cohort()[0]
+
+    def trainee(self, trainee: str) -> tuple[TraineeSummary, list[StoredSession]]:
+        """One trainee's standing and sessions (oldest first); an unknown id is refused by name."""
+        with self.engine.connect() as conn:
+            name = conn.execute(sa.select(schema.trainees.c.name).where(schema.trainees.c.id == trainee)).first()
+        if name is None:
+            raise ValueError(f"trainee {trainee!r} is not in store {self.url}")
+        rows = self.sessions(trainee)
+        return summary(trainee, name.name, rows, self.pass_marks()), rows
 
     def export_csv(self) -> str:
         """Every session as one CSV row: trainee, time, scene, score, its parts, every clinical metric, the
@@ -413,10 +428,9 @@ def summary(trainee: str, name: str | None, sessions: list[StoredSession], marks
     return TraineeSummary(trainee, name, len(sessions), float(scores[-1]), float(scores.max()), trend, last.scene, status)
 
 
-def score_bytes(data: bytes, log_name: str, scene: dict[str, Any] | None = None,
-                scene_named: str | None = None) -> dict[str, Any]:
-    """Score a log from its bytes (:func:`softenv.training.scoring.score_file`); the report names the log
-    ``log_name``."""
+@contextlib.contextmanager
+def log_file(data: bytes, log_name: str) -> Iterator[Path]:
+    """A kept log's bytes as a file the log readers take (its suffix, from ``log_name``, names the format)."""
     suffix = Path(log_name).suffix
     if suffix not in (".csv", ".npz"):
         raise ValueError(f"log {log_name!r}: unknown format {suffix!r}; use .csv or .npz")
@@ -424,8 +438,16 @@ def score_bytes(data: bytes, log_name: str, scene: dict[str, Any] | None = None,
         path = Path(folder) / f"log{suffix}"
         path.write_bytes(data)
         try:
-            report = scoring.score_file(path, scene, scene_named=scene_named)
+            yield path
         except ValueError as exc:             # name the log as the lab knows it, not the temporary file
             raise ValueError(str(exc).replace(str(path), log_name)) from None
+
+
+def score_bytes(data: bytes, log_name: str, scene: dict[str, Any] | None = None,
+                scene_named: str | None = None) -> dict[str, Any]:
+    """Score a log from its bytes (:func:`softenv.training.scoring.score_file`); the report names the log
+    ``log_name``."""
+    with log_file(data, log_name) as path:
+        report = scoring.score_file(path, scene, scene_named=scene_named)
     report["trajectory"] = log_name
     return report

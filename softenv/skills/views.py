@@ -12,9 +12,7 @@ from __future__ import annotations
 
 import io
 import math
-import tempfile
 import threading
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,7 +22,7 @@ from PIL import Image
 from ..training.logs import HAND_LOG, read_log
 from ..training.scoring import log_config, replay, replay_hand, scene_of
 from .passmark import PassMark
-from .store import StoredSession
+from .store import StoredSession, log_file
 
 FRAMES = 30                     # frames in a replay's animation, whatever the session's length
 PLAYBACK_S = 6.0                # how long one pass of the animation lasts
@@ -49,15 +47,11 @@ def _svg(fig: Figure) -> str:
     return text[text.index("<svg"):]                  # inline in a page: no XML prolog or doctype
 
 
-def metrics_of(report: dict[str, Any]) -> dict[str, float | None]:
-    """A report's metrics as the trainee's page plots them: a hand log's clinical ones, else the replay's."""
-    m = report["metrics"]
+def metrics_of(report: dict[str, Any], who: str = "metrics") -> dict[str, float | None]:
+    """The metrics a page shows of the trainee (``who="metrics"``) or the expert (``"expert"``): a hand log's
+    clinical ones, else the replay's."""
+    m = report[who]
     return dict(m["clinical"]) if "clinical" in m else {k: v for k, v in m.items() if k in METRIC_LABELS}
-
-
-def expert_metrics(report: dict[str, Any]) -> dict[str, float | None]:
-    e = report["expert"]
-    return dict(e["clinical"]) if "clinical" in e else {k: v for k, v in e.items() if k in METRIC_LABELS}
 
 
 def cohort_svg(sessions: dict[str, list[StoredSession]], marks: dict[str, PassMark]) -> str:
@@ -90,7 +84,7 @@ def trainee_svg(rows: list[StoredSession], mark: PassMark | None) -> str:
                 ax.axhline(mark.mark, color="#b03030", lw=1, ls=":", label="pass mark")
         else:
             values = [_number(metrics_of(r.report).get(name)) for r in rows]
-            expert = _number(expert_metrics(rows[-1].report).get(name))
+            expert = _number(metrics_of(rows[-1].report, "expert").get(name))
         ax.plot(x, values, marker="o", ms=3, lw=1.2, color="#1f5f99")
         if expert is not None and math.isfinite(expert):
             ax.axhline(expert, color="0.35", lw=1, ls="--", label="expert")
@@ -123,9 +117,7 @@ def parts_svg(report: dict[str, Any]) -> str:
 
 def replay_gif(log_name: str, data: bytes, scene: dict[str, Any] | None) -> bytes:
     """The replay of a kept log on its scene, as an animated GIF of :data:`FRAMES` frames."""
-    with tempfile.TemporaryDirectory(prefix="softenv-replay-") as folder:
-        path = Path(folder) / f"log{Path(log_name).suffix}"
-        path.write_bytes(data)
+    with log_file(data, log_name) as path:
         schema, table = read_log(path)
         sections, _ = scene_of(path, schema, scene)
     steps = (table[-1, 0] - table[0, 0]) / log_config(schema, sections)["dynamics"]["dt"]

@@ -25,7 +25,6 @@ import functools
 import ipaddress
 import json
 import secrets
-import threading
 from dataclasses import dataclass, field
 from datetime import timezone
 from importlib.resources import files
@@ -42,12 +41,13 @@ from starlette_csrf import CSRFMiddleware
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .. import __version__
-from ..training.logs import MAX_FILE_BYTES
+from ..training.logs import HAND_LOG
 from . import views
 from .passmark import contrasting_groups
 from .store import Store, StoredSession
 
 TEMPLATES = Jinja2Templates(directory=str(files(__package__ or "softenv.skills") / "templates"))
+TEMPLATES.env.filters["when"] = lambda d: d.astimezone(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 TOKEN_COOKIE = "softenv_token"
 
 
@@ -84,13 +84,11 @@ class Dashboard:
 
     store: Store
     jobs: dict[str, Job] = field(default_factory=dict)
-    lock: threading.Lock = field(default_factory=threading.Lock)
 
     def start(self, title: str, work: Callable[[Job], str]) -> tuple[Job, BackgroundTask]:
         """A job running ``work(job)`` (which returns the page to go to when done) after the response."""
         job = Job(secrets.token_urlsafe(8), title)
-        with self.lock:
-            self.jobs[job.id] = job
+        self.jobs[job.id] = job
 
         def run() -> None:
             try:
@@ -110,30 +108,21 @@ def _board(request: Request) -> Dashboard:
     return board
 
 
-def _by_trainee(sessions: list[StoredSession]) -> dict[str, list[StoredSession]]:
-    out: dict[str, list[StoredSession]] = {}
-    for s in sessions:
-        out.setdefault(s.trainee, []).append(s)
-    return out
-
-
 async def cohort(request: Request) -> Response:
-    store = _board(request).store
-    marks = store.pass_marks()
-    sessions = store.sessions()
-    return _page(request, "cohort.html", trainees=store.trainees(), marks=marks,
-                 plot=views.cohort_svg(_by_trainee(sessions), marks) if sessions else "", sessions=len(sessions))
+    trainees, sessions, marks = _board(request).store.cohort()
+    count = sum(map(len, sessions.values()))
+    return _page(request, "cohort.html", trainees=trainees, marks=marks, sessions=count,
+                 plot=views.cohort_svg(sessions, marks) if count else "")
 
 
 async def trainee(request: Request) -> Response:
     store = _board(request).store
-    tid = request.path_params["trainee"]
-    rows = store.sessions(tid)
-    people = {t.id: t for t in store.trainees()}
-    if tid not in people:
-        return _page(request, "message.html", 404, title="No such trainee", message=f"trainee {tid!r} is not in the store")
+    try:
+        standing, rows = store.trainee(request.path_params["trainee"])
+    except ValueError as exc:
+        return _page(request, "message.html", 404, title="No such trainee", message=str(exc))
     mark = store.pass_marks().get(rows[-1].scene) if rows else None
-    return _page(request, "trainee.html", trainee=people[tid], sessions=rows, mark=mark,
+    return _page(request, "trainee.html", trainee=standing, sessions=rows, mark=mark,
                  plot=views.trainee_svg(rows, mark) if rows else "")
 
 
@@ -151,7 +140,7 @@ async def session(request: Request) -> Response:
     store = _board(request).store
     return _page(request, "session.html", s=found, r=found.report, parts=views.parts_svg(found.report),
                  history=store.score_history(found.id), metrics=views.metrics_of(found.report),
-                 expert=views.expert_metrics(found.report), labels=views.METRIC_LABELS)
+                 expert=views.metrics_of(found.report, "expert"), labels=views.METRIC_LABELS)
 
 
 def session_replay(request: Request) -> Response:
@@ -181,17 +170,14 @@ def session_log(request: Request) -> Response:
 async def upload(request: Request) -> Response:
     board = _board(request)
     if request.method == "GET":
-        return _page(request, "upload.html", trainees=board.store.trainees(), error="")
-    async with request.form(max_files=1, max_fields=8, max_part_size=MAX_FILE_BYTES) as form:
+        return _page(request, "upload.html", trainees=board.store.trainee_ids(), error="")
+    async with request.form(max_files=1, max_fields=8) as form:
         trainee_id = str(form.get("trainee", "")).strip()
         log = form.get("log")
         if log is None or isinstance(log, str) or not log.filename:
-            return _page(request, "upload.html", 400, trainees=board.store.trainees(),
+            return _page(request, "upload.html", 400, trainees=board.store.trainee_ids(),
                          error="choose a log file (.csv or .npz) to upload")
         data, name = await log.read(), Path(log.filename).name
-    if len(data) > MAX_FILE_BYTES:
-        return _page(request, "upload.html", 400, trainees=board.store.trainees(),
-                     error=f"log {name!r} has {len(data):,} bytes; at most {MAX_FILE_BYTES:,}")
 
     def work(job: Job) -> str:
         job.progress(0, 1, "scoring")
@@ -221,7 +207,7 @@ async def passmarks(request: Request) -> Response:
     async with request.form(max_fields=4) as form:
         scene = str(form.get("scene", ""))
     sessions = [s for s in board.store.sessions() if s.scene == scene]
-    if not sessions or sessions[0].log_kind != "hand-pose log":
+    if not sessions or sessions[0].log_kind != HAND_LOG.name:
         return _page(request, "passmarks.html", 400, marks=board.store.pass_marks(), scenes=board.store.scenes(),
                      error=f"scene {scene!r}: a pass mark needs a hand-pose scene with kept sessions "
                            "(the profiles are hand-pose trainees)")
@@ -312,6 +298,5 @@ def make_app(store: Store, token: str | None = None) -> ASGIApp:
         Route("/export.csv", export),
     ])
     app.state.board = Dashboard(store)
-    TEMPLATES.env.filters["when"] = lambda d: d.astimezone(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     protected: ASGIApp = CSRFMiddleware(app, secret=secrets.token_hex(32), cookie_samesite="strict")
     return TokenGate(protected, token) if token else protected
