@@ -1,0 +1,803 @@
+"""The laryngoscope's control period as one NVIDIA Warp kernel, written once for Warp's CPU (LLVM) and CUDA
+back ends and, through Warp's generated adjoint, for gradients: the hand's clipped command, the tongue's
+contact (:func:`~.physics.tongue_substep_floats`), the virtual coupling, the blade against the incisors
+and Chipmunk's solver.
+
+Chipmunk's step runs as pymunk's ``space.step`` runs it, with its expressions as written, so the same
+IEEE operations run in the same order: positions (spending the contact's bias velocities), the collision
+and the arbiter's pre-step, the springs' explicit impulses, velocities, the contact's cached impulses,
+then ``SOLVER_ITERATIONS`` passes of the contact's and the springs' implicit impulses. The collision is
+``SegmentToPoly`` without its iterative search: the nearest of the Minkowski difference's candidate
+edges while the cores are apart (GJK), the nearest edge of its hull once the blade sinks past the
+incisors' radius (EPA), then ``ClosestPointsNew``, ``SupportEdgeFor*`` and ``ContactPoints``. Warp's CPU
+path compiles without fused multiply-add and calls the C library's ``sin``, ``cos``, ``exp`` and
+``sqrt``, so ``tests/test_laryngoscope_warp.py`` holds every device to a single pymunk device bit for bit.
+
+One device's state is a :class:`Device`; :func:`substep` advances it by one substep. Two kernels call it:
+:func:`control_period` runs a period's substeps in registers (the fast path, compiled without an
+adjoint), and :func:`one_substep` runs one substep from one array to another, so that a
+:class:`warp.Tape` over a launch a substep keeps every intermediate state for the adjoint (Warp
+differentiates a loop only where it unrolls it). Warp does not differentiate an assignment to a vector's
+component, so :func:`substep` builds new vectors (:func:`put`).
+
+No contact state crosses a control period (:mod:`.space`): :func:`start` opens each period with no
+arbiter and no bias velocity. Warp caches the compiled kernels in the user's cache directory
+(``warp.config.kernel_cache_dir``), keyed by their source.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from ..contact import TongueContact
+from .params import SPRING_LENGTH, LaryngoscopeParams
+from .physics import Constants
+from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY, IncisorContact, KernelLaryngoscopes
+
+wp.config.log_level = wp.LOG_WARNING      # Warp greets and reports every module it loads otherwise
+wp.init()
+
+f64 = wp.float64
+ZERO, HALF, ONE, TWO = f64(0.0), f64(0.5), f64(1.0), f64(2.0)
+TINY_ = f64(TINY)              # CPFLOAT_MIN
+ANCHOR_0, ANCHOR_1 = (wp.constant(wp.vec2d(*anchor)) for anchor in HAND_ANCHORS)    # the springs' hand anchors
+
+
+@wp.struct
+class Params:
+    """Every constant a substep reads (:class:`~.physics.Constants` and :class:`~.state.IncisorContact`)."""
+
+    R: f64
+    h: f64
+    inv_m: f64
+    inv_I: f64
+    h_over_m: f64
+    k: f64
+    c: f64
+    k_t: f64
+    mu: f64
+    k_ref: f64
+    damping: f64
+    step: f64
+    inv_step: f64
+    top: int
+    k_rot: f64
+    c_rot: f64
+    grip: wp.vec2d
+    heel: wp.vec2d
+    tip: wp.vec2d
+    low: wp.vec4d
+    high: wp.vec4d
+    end0: wp.vec2d       # the incisors' segment, its normal and radius
+    end1: wp.vec2d
+    seg_normal: wp.vec2d
+    radius: f64
+    friction: f64
+    slop: f64
+    bias_coef: f64
+    dt_coef: f64
+    w_coef: f64          # the wrist damper's velocity coefficient, 1 - exp(-c_rot h / I)
+    vertices: int        # the blade polygon's vertex count
+    max_hand_speed: f64  # the hand's speeds at |action| = 1 (m/s, rad/s)
+    max_pitch_rate: f64
+    max_sweep_speed: f64
+
+
+@wp.struct
+class Device:
+    """One device's state within a control period: blade (position, angle, velocity), hand, lateral
+    spring, hand velocity, tongue contact, the blade's bias velocity, the incisors' arbiter and the
+    period's summed incisor impulse."""
+
+    px: f64
+    py: f64
+    a: f64
+    ca: f64              # cos and sin of the blade's angle, as the last substep left them
+    sa: f64
+    vx: f64
+    vy: f64
+    w: f64
+    gx: f64
+    gy: f64
+    pitch: f64
+    lat_y: f64
+    lat_v: f64
+    hand_lat: f64
+    anchor: f64
+    hvx: f64
+    hvy: f64
+    hw: f64
+    hl: f64
+    P: f64
+    Q: f64
+    cx: f64
+    cy: f64
+    bvx: f64
+    bvy: f64
+    bw: f64
+    alive: int
+    ticks: int
+    anx: f64
+    any_: f64
+    ex: wp.vec2i
+    feat: wp.vec4i       # slot 0's (segment end, blade vertex), then slot 1's
+    jn: wp.vec2d
+    jt: wp.vec2d
+    impulse: f64
+
+
+@wp.func
+def clip(x: f64, low: f64, high: f64) -> f64:
+    if x < low:
+        return low
+    if x > high:
+        return high
+    return x
+
+
+@wp.func
+def put(v: wp.vec2d, s: int, x: f64) -> wp.vec2d:
+    """``v`` with component ``s`` set to ``x``: a new vector, as Warp's adjoint needs (it does not
+    differentiate through assignment to a component)."""
+    if s == 0:
+        return wp.vec2d(x, v[1])
+    return wp.vec2d(v[0], x)
+
+
+@wp.func
+def max0(x: f64) -> f64:
+    if x > ZERO:
+        return x
+    return ZERO
+
+
+@wp.func
+def table_index(x: f64, top: int) -> int:
+    if x < f64(top):
+        return int(x)
+    return top
+
+
+@wp.func
+def world_vertex(local: wp.array(dtype=wp.vec2d), j: int, ca: f64, sa: f64, px: f64, py: f64) -> wp.vec2d:
+    lx, ly = local[j][0], local[j][1]
+    return wp.vec2d((ca * lx + -sa * ly) + px, (sa * lx + ca * ly) + py)
+
+
+@wp.func
+def world_normal(local_normals: wp.array(dtype=wp.vec2d), j: int, ca: f64, sa: f64) -> wp.vec2d:
+    lx, ly = local_normals[j][0], local_normals[j][1]
+    return wp.vec2d(ca * lx + -sa * ly, sa * lx + ca * ly)
+
+
+@wp.func
+def closest_t(ax: f64, ay: f64, bx: f64, by: f64) -> f64:
+    dx, dy = bx - ax, by - ay
+    d2 = dx * dx + dy * dy
+    if d2 == ZERO:
+        return ZERO
+    return -clip((dx * (ax + bx) + dy * (ay + by)) / d2, -ONE, ONE)
+
+
+@wp.func
+def lerp_t(ax: f64, ay: f64, bx: f64, by: f64, t: f64) -> wp.vec2d:
+    ht = HALF * t
+    return wp.vec2d(ax * (HALF - ht) + bx * (HALF + ht), ay * (HALF - ht) + by * (HALF + ht))
+
+
+@wp.func
+def segment_end(p: Params, i: int) -> wp.vec2d:
+    if i == 0:
+        return p.end0
+    return p.end1
+
+
+@wp.func
+def separated(p: Params, local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d), ca: f64,
+              sa: f64, px: f64, py: f64) -> bool:
+    """Whether both segment ends lie further than the radius (and a margin far above rounding) outside
+    one of the blade's edges: the convex blade then clears the rounded segment, and :func:`collide` would find no contact."""
+    gap = p.radius * (ONE + f64(1e-9)) + f64(1e-12)
+    for j in range(p.vertices):
+        v = world_vertex(local, j, ca, sa, px, py)
+        n = world_normal(local_normals, j, ca, sa)
+        plane = n[0] * v[0] + n[1] * v[1]
+        if n[0] * p.end0[0] + n[1] * p.end0[1] - plane > gap and n[0] * p.end1[0] + n[1] * p.end1[1] - plane > gap:
+            return True
+    return False
+
+
+@wp.func
+def candidate(k: int, count: int) -> wp.vec4i:
+    """Candidate edge ``k`` of the difference: (segment end, blade vertex) at its start and its end."""
+    if k < 2 * count:
+        return wp.vec4i(k // count, k % count, k // count, (k % count + 1) % count)
+    return wp.vec4i(0, k - 2 * count, 1, k - 2 * count)
+
+
+@wp.func
+def minkowski(p: Params, local: wp.array(dtype=wp.vec2d), ca: f64, sa: f64, px: f64, py: f64, i: int,
+              j: int) -> wp.vec2d:
+    """Point (segment end ``i``, blade vertex ``j``) of the difference: vertex minus end."""
+    v = world_vertex(local, j, ca, sa, px, py)
+    e = segment_end(p, i)
+    return wp.vec2d(v[0] - e[0], v[1] - e[1])
+
+
+@wp.func
+def hull_side(p: Params, local: wp.array(dtype=wp.vec2d), ca: f64, sa: f64, px: f64, py: f64, ax: f64,
+              ay: f64, bx: f64, by: f64) -> int:
+    """1 if every point of the difference lies left of ``a -> b``, -1 if right, 0 otherwise."""
+    ex, ey = bx - ax, by - ay
+    left = bool(True)
+    right = bool(True)
+    for i in range(2):
+        e = segment_end(p, i)
+        for j in range(p.vertices):
+            v = world_vertex(local, j, ca, sa, px, py)
+            side = ex * ((v[1] - e[1]) - ay) - ey * ((v[0] - e[0]) - ax)
+            left = left and side >= ZERO
+            right = right and side <= ZERO
+    if left:
+        return 1
+    if right:
+        return -1
+    return 0
+
+
+@wp.func
+def cores_overlap(p: Params, local: wp.array(dtype=wp.vec2d), ca: f64, sa: f64, px: f64, py: f64) -> bool:
+    """Whether the origin lies strictly inside the difference's hull."""
+    count = p.vertices
+    for k in range(3 * count):
+        c = candidate(k, count)
+        a = minkowski(p, local, ca, sa, px, py, c[0], c[1])
+        b = minkowski(p, local, ca, sa, px, py, c[2], c[3])
+        left = hull_side(p, local, ca, sa, px, py, a[0], a[1], b[0], b[1])
+        origin = (b[0] - a[0]) * -a[1] - (b[1] - a[1]) * -a[0]
+        if (left == 1 and not origin > ZERO) or (left == -1 and not origin < ZERO):
+            return False
+    return True
+
+
+@wp.struct
+class Collision:
+    """What :func:`collide` finds: the normal, each contact's points on the segment and on the blade,
+    their features and which exist."""
+
+    nx: f64
+    ny: f64
+    p0: wp.vec4d
+    p1: wp.vec4d
+    feat: wp.vec4i
+    ex: wp.vec2i
+
+
+@wp.func
+def collide(p: Params, local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d), ca: f64,
+            sa: f64, px: f64, py: f64) -> Collision:
+    """Chipmunk's ``SegmentToPoly`` for one blade: the nearest edge of the difference (GJK's while the
+    cores are apart, EPA's once they overlap), then its closest points, normal and contact points."""
+    count = p.vertices
+    inside = cores_overlap(p, local, ca, sa, px, py)
+    best_d, best_px, best_py, e_dx, e_dy, best_left = f64(math.inf), f64(0.0), f64(0.0), f64(0.0), f64(0.0), int(0)
+    best = wp.vec4i(0, 0, 0, 0)
+    for k in range(3 * count):
+        c = candidate(k, count)
+        a = minkowski(p, local, ca, sa, px, py, c[0], c[1])
+        b = minkowski(p, local, ca, sa, px, py, c[2], c[3])
+        left = int(0)
+        if inside:
+            left = hull_side(p, local, ca, sa, px, py, a[0], a[1], b[0], b[1])
+        if not (inside and left == 0):                   # inside the hull: not where EPA ends
+            t = closest_t(a[0], a[1], b[0], b[1])
+            q = lerp_t(a[0], a[1], b[0], b[1], t)
+            d = q[0] * q[0] + q[1] * q[1]
+            if d < best_d:                               # the first of equals, as argmin
+                best_d, best_px, best_py, best_left = d, q[0], q[1], left
+                best = c
+                e_dx, e_dy = b[0] - a[0], b[1] - a[1]
+    flip = e_dy * best_px + -e_dx * best_py < ZERO
+    if inside:
+        flip = best_left == 1
+    i0, j0, i1, j1 = best[0], best[1], best[2], best[3]
+    if flip:
+        i0, j0, i1, j1 = best[2], best[3], best[0], best[1]
+    m0 = minkowski(p, local, ca, sa, px, py, i0, j0)
+    m1 = minkowski(p, local, ca, sa, px, py, i1, j1)
+    # ClosestPointsNew
+    t = closest_t(m0[0], m0[1], m1[0], m1[1])
+    q = lerp_t(m0[0], m0[1], m1[0], m1[1], t)
+    rx, ry = m1[1] - m0[1], -(m1[0] - m0[0])
+    inv = ONE / (wp.sqrt(rx * rx + ry * ry) + TINY_)
+    nx, ny = rx * inv, ry * inv
+    d = nx * q[0] + ny * q[1]
+    if not (d <= ZERO or (-ONE < t and t < ONE)):         # a vertex pair
+        d2 = wp.sqrt(q[0] * q[0] + q[1] * q[1])
+        inv = ONE / (d2 + TINY_)
+        nx, ny, d = q[0] * inv, q[1] * inv, d2
+    # SupportEdgeForSegment(seg, n) and SupportEdgeForPoly(poly, -n)
+    sa_i, sb_i = 1, 0
+    if p.seg_normal[0] * nx + p.seg_normal[1] * ny > ZERO:
+        sa_i, sb_i = 0, 1
+    bx, by = -nx, -ny
+    v0 = world_vertex(local, 0, ca, sa, px, py)
+    i1p, top = int(0), v0[0] * bx + v0[1] * by
+    for j in range(1, count):
+        v = world_vertex(local, j, ca, sa, px, py)
+        s = v[0] * bx + v[1] * by
+        if s > top:                                      # the first of equals, as argmax
+            i1p, top = j, s
+    i0p, i2p = (i1p - 1 + count) % count, (i1p + 1) % count
+    n1 = world_normal(local_normals, i1p, ca, sa)
+    n2 = world_normal(local_normals, i2p, ca, sa)
+    qa, qb = i1p, i2p
+    if bx * n1[0] + by * n1[1] > bx * n2[0] + by * n2[1]:
+        qa, qb = i0p, i1p
+    # ContactPoints (the blade has no radius)
+    radius = p.radius
+    touching = (d - radius) - ZERO <= ZERO and d <= radius + ZERO
+    ea, eb = segment_end(p, sa_i), segment_end(p, sb_i)
+    sax, say, sbx, sby = ea[0], ea[1], eb[0], eb[1]
+    va, vb = world_vertex(local, qa, ca, sa, px, py), world_vertex(local, qb, ca, sa, px, py)
+    qax, qay, qbx, qby = va[0], va[1], vb[0], vb[1]
+    d1a, d1b = sax * ny - say * nx, sbx * ny - sby * nx
+    d2a, d2b = qax * ny - qay * nx, qbx * ny - qby * nx
+    e1_denom = ONE / (d1b - d1a + TINY_)
+    e2_denom = ONE / (d2b - d2a + TINY_)
+    out = Collision()
+    out.nx = nx
+    out.ny = ny
+    out.feat = wp.vec4i(sa_i, qb, sb_i, qa)
+    ex = wp.vec2i(0, 0)
+    for slot in range(2):
+        first, second = d2b - d1a, d1a - d2a
+        if slot == 1:
+            first, second = d2a - d1a, d1b - d2a
+        fu = clip(first * e1_denom, ZERO, ONE)
+        fv = clip(second * e2_denom, ZERO, ONE)
+        pts = wp.vec4d(nx * radius + (sax * (ONE - fu) + sbx * fu), ny * radius + (say * (ONE - fu) + sby * fu),
+                       nx * -ZERO + (qax * (ONE - fv) + qbx * fv), ny * -ZERO + (qay * (ONE - fv) + qby * fv))
+        if slot == 0:
+            out.p0 = pts
+        else:
+            out.p1 = pts
+        if touching and (pts[2] - pts[0]) * nx + (pts[3] - pts[1]) * ny <= ZERO:
+            ex[slot] = 1
+    out.ex = ex
+    return out
+
+
+@wp.func
+def hand_command(action: wp.vec4d, pitch: f64, p: Params) -> wp.vec4d:
+    """The hand's velocities (x, z, pitch rate, lateral) for a normalised action at hand pitch ``pitch``
+    (:func:`~.physics.hand_command`, the same expressions)."""
+    cos_a, sin_a = wp.cos(pitch), wp.sin(pitch)
+    v = p.max_hand_speed
+    return wp.vec4d(v * (-action[0] * cos_a + action[1] * sin_a), v * (-action[0] * sin_a - action[1] * cos_a),
+                    p.max_pitch_rate * action[3], p.max_sweep_speed * action[2])
+
+
+@wp.func
+def action_of(actions: wp.array2d(dtype=f64), i: int) -> wp.vec4d:
+    return wp.vec4d(actions[i, 0], actions[i, 1], actions[i, 2], actions[i, 3])
+
+
+@wp.func
+def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64),
+            local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
+    """One substep of one device: the hand's clipped velocity, the tongue's force, then Chipmunk's step of
+    the coupled blade against the incisors (``cpSpaceStep``)."""
+    h = p.h
+    m_inv, i_inv = p.inv_m, p.inv_I
+    px, py, a, ca, sa, vx, vy, w = f64(d.px), f64(d.py), f64(d.a), f64(d.ca), f64(d.sa), f64(d.vx), f64(d.vy), f64(d.w)
+    gx, gy, pitch = f64(d.gx), f64(d.gy), f64(d.pitch)
+    hvx = clip(command[0], (p.low[0] - gx) / h, (p.high[0] - gx) / h)
+    hvy = clip(command[1], (p.low[1] - gy) / h, (p.high[1] - gy) / h)
+    hw = clip(command[2], (p.low[2] - pitch) / h, (p.high[2] - pitch) / h)
+    hl = clip(command[3], (p.low[3] - d.hand_lat) / h, (p.high[3] - d.hand_lat) / h)
+    hand_lat = d.hand_lat + h * hl
+    # the tongue (physics.tongue_substep_floats)
+    lat_y, lat_v, anchor = f64(d.lat_y), f64(d.lat_v), f64(d.anchor)
+    ex_ = px + ca * p.heel[0] - sa * p.heel[1]
+    ey_ = py + sa * p.heel[0] + ca * p.heel[1]
+    dx = (px + ca * p.tip[0] - sa * p.tip[1]) - ex_
+    dy = (py + sa * p.tip[0] + ca * p.tip[1]) - ey_
+    t = clip(-(ex_ * dx + ey_ * dy) / (dx * dx + dy * dy), ZERO, ONE)
+    cx = ex_ + t * dx
+    cy = ey_ + t * dy
+    dist = wp.sqrt(cx * cx + cy * cy) + f64(1e-300)
+    on_tongue = dist < p.R
+    fx, fy, torque, P = f64(0.0), f64(0.0), f64(0.0), f64(0.0)
+    if on_tongue:
+        depth = p.R - dist
+        nx = cx / dist
+        ny = cy / dist
+        rx = cx - px
+        ry = cy - py
+        approach = -((vx - w * ry) * nx + (vy + w * rx) * ny)
+        rn = rx * ny - ry * nx
+        inv_meff = p.inv_m + rn * rn * p.inv_I
+        i = table_index(max0(depth) * p.inv_step, p.top)
+        slope = slopes[i]
+        law = loads[i] + (depth - f64(i) * p.step) * slope
+        ahead = slopes[table_index(max0(depth + h * approach) * p.inv_step, p.top)]
+        if ahead > slope:
+            slope = ahead
+        excess = max0(slope - p.k_ref)
+        stiff = excess * h + TWO * wp.sqrt(excess / inv_meff)
+        qx, qy = ca * p.grip[0] - sa * p.grip[1], sa * p.grip[0] + ca * p.grip[1]
+        Fx = p.k * (gx - px - qx) + p.c * (hvx - vx + w * qy)
+        Fy = p.k * (gy - py - qy) + p.c * (hvy - vy - w * qx)
+        tau = qx * Fy - qy * Fx + p.k_rot * (pitch - a) + p.c_rot * (hw - w)
+        push = -(Fx * nx + Fy * ny) * p.inv_m - tau * rn * p.inv_I
+        beta = stiff * h * inv_meff
+        P = max0((law + (p.damping + stiff) * approach + stiff * h * push) / (ONE + beta))
+        fx = P * nx
+        fy = P * ny
+        torque = rx * fy - ry * fx
+    k_s = p.k_t * f64(on_tongue)
+    lat_v = (lat_v + p.h_over_m * (p.k * (hand_lat - lat_y) + p.c * hl - k_s * (lat_y - anchor))) / \
+        (ONE + p.h_over_m * p.c)
+    lat_y = lat_y + h * lat_v
+    stuck = k_s * (lat_y - anchor)
+    Q = clip(stuck, -(p.mu * P), p.mu * P)
+    if on_tongue:
+        if Q != stuck:
+            anchor = lat_y - Q / p.k_t
+    else:
+        anchor = lat_y
+    # cpSpaceStep: 1. positions, spending the contact's bias velocities
+    gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
+    px, py, a = px + (vx + d.bvx) * h, py + (vy + d.bvy) * h, a + (w + d.bw) * h
+    bvx, bvy, bw = f64(0.0), f64(0.0), f64(0.0)
+    ca, sa, cp, sp = wp.cos(a), wp.sin(a), wp.cos(pitch), wp.sin(pitch)
+    # collide, update the arbiter (cpArbiterUpdate), pre-step its contacts (cpArbiterPreStep)
+    alive, ticks = int(d.alive), int(d.ticks)
+    anx, any_ = f64(d.anx), f64(d.any_)
+    ex, feat, jn, jt = wp.vec2i(d.ex), wp.vec4i(d.feat), wp.vec2d(d.jn), wp.vec2d(d.jt)
+    touching, first = bool(False), bool(False)
+    r2x, r2y = wp.vec2d(), wp.vec2d()          # each contact's offset from the blade's centre
+    n_mass, t_mass, bias, j_bias, bounce = wp.vec2d(), wp.vec2d(), wp.vec2d(), wp.vec2d(), wp.vec2d()
+    if alive == 0 and separated(p, local, local_normals, ca, sa, px, py):
+        ticks += 1                # no contact, no arbiter: only its age changes, as collide's would
+    else:
+        hit = collide(p, local, local_normals, ca, sa, px, py)
+        touching = hit.ex[0] == 1 or hit.ex[1] == 1
+        jn_new, jt_new = wp.vec2d(), wp.vec2d()
+        for new in range(2):
+            for old in range(2):
+                if (alive == 1 and ex[old] == 1 and hit.feat[2 * new] == feat[2 * old]
+                        and hit.feat[2 * new + 1] == feat[2 * old + 1]):
+                    jn_new = put(jn_new, new, jn[old])
+                    jt_new = put(jt_new, new, jt[old])
+        first = touching and not (alive == 1 and ticks == 0)
+        ticks = wp.where(touching, 0, ticks + 1)
+        alive = wp.where(touching or (alive == 1 and ticks < PERSISTENCE), 1, 0)
+        if touching:              # the arbiter's normal and pre-step: read only while touching
+            ex, feat, jn, jt = wp.vec2i(hit.ex), wp.vec4i(hit.feat), jn_new, jt_new
+            anx, any_ = f64(hit.nx), f64(hit.ny)
+            for s in range(2):
+                pts = wp.vec4d(hit.p0)
+                if s == 1:
+                    pts = wp.vec4d(hit.p1)
+                r1x, r1y = pts[0] - ZERO, pts[1] - ZERO
+                rx, ry = pts[2] - px, pts[3] - py
+                r2x = put(r2x, s, rx)
+                r2y = put(r2y, s, ry)
+                rcn = rx * any_ - ry * anx
+                n_mass = put(n_mass, s, ONE / (ZERO + (m_inv + i_inv * rcn * rcn)))
+                rct = rx * anx - ry * -any_
+                t_mass = put(t_mass, s, ONE / (ZERO + (m_inv + i_inv * rct * rct)))
+                dist_s = ((rx - r1x) + px) * anx + ((ry - r1y) + py) * any_
+                low = dist_s + p.slop
+                lowest = low
+                if ZERO < low:
+                    lowest = ZERO
+                bias = put(bias, s, -p.bias_coef * lowest / h)
+                j_bias = put(j_bias, s, ZERO)
+                # the bounce velocity (no elasticity)
+                bounce = put(bounce, s, ((vx + -ry * w) * anx + (vy + rx * w) * any_) * (ZERO * ZERO))
+    # 2. the springs' explicit impulses
+    gqx, gqy = ca * p.grip[0] + -sa * p.grip[1], sa * p.grip[0] + ca * p.grip[1]
+    # each spring's hand anchor (world frame), normal, mass, damping coefficient, target velocity, impulse
+    spring_r1x, spring_r1y, spring_nx, spring_ny = wp.vec2d(), wp.vec2d(), wp.vec2d(), wp.vec2d()
+    spring_mass, spring_coef, spring_target, spring_j = wp.vec2d(), wp.vec2d(), wp.vec2d(), wp.vec2d()
+    for s in range(2):
+        anchor_s = ANCHOR_0
+        if s == 1:
+            anchor_s = ANCHOR_1
+        ax_, ay_ = anchor_s[0], anchor_s[1]
+        r1x, r1y = cp * ax_ + -sp * ay_, sp * ax_ + cp * ay_
+        sdx, sdy = (px + gqx) - (gx + r1x), (py + gqy) - (gy + r1y)
+        sdist = wp.sqrt(sdx * sdx + sdy * sdy)
+        inv = ONE / sdist
+        nx, ny = sdx * inv, sdy * inv
+        rcn = gqx * ny - gqy * nx
+        kk = m_inv + i_inv * rcn * rcn
+        j = (f64(SPRING_LENGTH) - sdist) * p.k * h
+        vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
+        w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
+        spring_r1x, spring_r1y = put(spring_r1x, s, r1x), put(spring_r1y, s, r1y)
+        spring_nx, spring_ny = put(spring_nx, s, nx), put(spring_ny, s, ny)
+        spring_mass = put(spring_mass, s, ONE / kk)
+        spring_coef = put(spring_coef, s, ONE - wp.exp(-p.c * h * kk))
+        spring_j = put(spring_j, s, j)
+    j_rot = ((pitch - a) - ZERO) * p.k_rot * h
+    w = w + j_rot * i_inv
+    target_wrn = f64(0.0)
+    # 3. velocities
+    vx, vy = vx * ONE + (ZERO + fx * m_inv) * h, vy * ONE + (ZERO + fy * m_inv) * h
+    w = w * ONE + torque * i_inv * h
+    for s in range(2):                                   # cpArbiterApplyCachedImpulse
+        if touching and not first and ex[s] == 1:
+            jx, jy = anx * jn[s] - any_ * jt[s], anx * jt[s] + any_ * jn[s]
+            jx, jy = jx * p.dt_coef, jy * p.dt_coef
+            vx, vy = vx + jx * m_inv, vy + jy * m_inv
+            w = w + i_inv * (r2x[s] * jy - r2y[s] * jx)
+    # 4. the implicit impulses: the contact's, then the springs' in the order added
+    i_sum = ONE / i_inv
+    for _pass in range(wp.static(SOLVER_ITERATIONS)):
+        for s in range(2):                               # cpArbiterApplyImpulse
+            if touching and ex[s] == 1:
+                rx, ry = r2x[s], r2y[s]
+                vbn = (bvx + -ry * bw) * anx + (bvy + rx * bw) * any_
+                vr_x, vr_y = vx + -ry * w, vy + rx * w
+                vrn = vr_x * anx + vr_y * any_
+                vrt = vr_x * -any_ + vr_y * anx
+                jbn = (bias[s] - vbn) * n_mass[s]
+                jbn_old = j_bias[s]
+                jb = max0(jbn_old + jbn)
+                jn_old = jn[s]
+                jn_acc = max0(jn_old + -(bounce[s] + vrn) * n_mass[s])
+                jt_max = p.friction * jn_acc
+                jt_old = jt[s]
+                x = jt_old + -vrt * t_mass[s]
+                if not x > -jt_max:                      # Chipmunk's cpfclamp: the lower bound first
+                    x = -jt_max
+                jt_acc = x
+                if not x < jt_max:
+                    jt_acc = jt_max
+                bx, by = anx * (jb - jbn_old), any_ * (jb - jbn_old)
+                dn, dt = jn_acc - jn_old, jt_acc - jt_old
+                jx, jy = anx * dn - any_ * dt, anx * dt + any_ * dn
+                bvx, bvy = bvx + bx * m_inv, bvy + by * m_inv
+                bw = bw + i_inv * (rx * by - ry * bx)
+                vx, vy = vx + jx * m_inv, vy + jy * m_inv
+                w = w + i_inv * (rx * jy - ry * jx)
+                j_bias, jn, jt = put(j_bias, s, jb), put(jn, s, jn_acc), put(jt, s, jt_acc)
+        for s in range(2):
+            r1x, r1y, nx, ny = spring_r1x[s], spring_r1y[s], spring_nx[s], spring_ny[s]
+            rel_x = (vx + -gqy * w) - (hvx + -r1y * hw)
+            rel_y = (vy + gqx * w) - (hvy + r1x * hw)
+            vrn = rel_x * nx + rel_y * ny
+            v_damp = (spring_target[s] - vrn) * spring_coef[s]
+            spring_target = put(spring_target, s, vrn + v_damp)
+            acc = spring_j[s]
+            j = (acc + v_damp * spring_mass[s]) - acc
+            spring_j = put(spring_j, s, acc + j)
+            vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
+            w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
+        wrn = hw - w
+        w_damp = (target_wrn - wrn) * p.w_coef
+        target_wrn = wrn + w_damp
+        j = j_rot - (j_rot - w_damp * i_sum)
+        j_rot = j_rot - j
+        w = w - j * i_inv
+    impulse = f64(d.impulse)
+    if alive == 1 and ticks == 0:                        # cpArbiterTotalImpulse
+        tx, ty = f64(0.0), f64(0.0)
+        for s in range(2):
+            if ex[s] == 1:
+                tx, ty = tx + (anx * jn[s] - any_ * jt[s]), ty + (anx * jt[s] + any_ * jn[s])
+        impulse = impulse + wp.sqrt(tx * tx + ty * ty)
+    out = Device()
+    out.px = px
+    out.py = py
+    out.a = a
+    out.ca = ca
+    out.sa = sa
+    out.vx = vx
+    out.vy = vy
+    out.w = w
+    out.gx = gx
+    out.gy = gy
+    out.pitch = pitch
+    out.lat_y = lat_y
+    out.lat_v = lat_v
+    out.hand_lat = hand_lat
+    out.anchor = anchor
+    out.hvx = hvx
+    out.hvy = hvy
+    out.hw = hw
+    out.hl = hl
+    out.P = P
+    out.Q = Q
+    out.cx = cx
+    out.cy = cy
+    out.bvx = bvx
+    out.bvy = bvy
+    out.bw = bw
+    out.alive = alive
+    out.ticks = ticks
+    out.anx = anx
+    out.any_ = any_
+    out.ex = ex
+    out.feat = feat
+    out.jn = jn
+    out.jt = jt
+    out.impulse = impulse
+    return out
+
+
+@wp.func
+def start(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
+          i: int) -> Device:
+    """Device ``i`` at the start of a control period: no arbiter, no bias velocity, no impulse yet."""
+    d = Device()
+    d.px = blade[i, 0]
+    d.py = blade[i, 1]
+    d.a = blade[i, 2]
+    d.vx = blade[i, 3]
+    d.vy = blade[i, 4]
+    d.w = blade[i, 5]
+    d.ca = wp.cos(d.a)
+    d.sa = wp.sin(d.a)
+    d.gx = hand[i, 0]
+    d.gy = hand[i, 1]
+    d.pitch = hand[i, 2]
+    d.lat_y = lateral[i, 0]
+    d.lat_v = lateral[i, 1]
+    d.hand_lat = lateral[i, 2]
+    d.anchor = lateral[i, 3]
+    return d
+
+
+@wp.func
+def finish(d: Device, count: int, p: Params, blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64),
+           lateral: wp.array2d(dtype=f64), hand_v: wp.array2d(dtype=f64), contact: wp.array2d(dtype=f64),
+           incisor: wp.array(dtype=f64), i: int):
+    """Device ``i``'s rows of the state arrays as a period of ``count`` substeps leaves them (the
+    incisors' force: the period's summed impulse over its duration)."""
+    blade[i, 0] = d.px
+    blade[i, 1] = d.py
+    blade[i, 2] = d.a
+    blade[i, 3] = d.vx
+    blade[i, 4] = d.vy
+    blade[i, 5] = d.w
+    hand[i, 0] = d.gx
+    hand[i, 1] = d.gy
+    hand[i, 2] = d.pitch
+    lateral[i, 0] = d.lat_y
+    lateral[i, 1] = d.lat_v
+    lateral[i, 2] = d.hand_lat
+    lateral[i, 3] = d.anchor
+    hand_v[i, 0] = d.hvx
+    hand_v[i, 1] = d.hvy
+    hand_v[i, 2] = d.hw
+    hand_v[i, 3] = d.hl
+    contact[i, 0] = d.P
+    contact[i, 1] = d.Q
+    contact[i, 2] = d.cx
+    contact[i, 3] = d.cy
+    incisor[i] = d.impulse / (f64(count) * p.h)
+
+
+@wp.kernel(enable_backward=False, module="unique")
+def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
+                   hand_v: wp.array2d(dtype=f64), contact: wp.array2d(dtype=f64), incisor: wp.array(dtype=f64),
+                   actions: wp.array2d(dtype=f64), count: int, p: Params, loads: wp.array(dtype=f64),
+                   slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
+                   local_normals: wp.array(dtype=wp.vec2d)):
+    """``count`` substeps of device ``i`` (its rows of the state arrays, updated in place), its hand
+    commanded by ``actions[i]`` (normalised, in the hand's frame at the period's start)."""
+    i = wp.tid()
+    d = start(blade, hand, lateral, i)
+    order = hand_command(action_of(actions, i), d.pitch, p)
+    for _ in range(count):
+        d = substep(d, p, order, loads, slopes, local, local_normals)
+    finish(d, count, p, blade, hand, lateral, hand_v, contact, incisor, i)
+
+
+@wp.kernel(module="unique")
+def open_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
+                actions: wp.array2d(dtype=f64), p: Params, devices: wp.array(dtype=Device),
+                command: wp.array(dtype=wp.vec4d)):
+    """The devices as :func:`start` opens a period and their hands' commands, for :func:`one_substep`
+    (the differentiable path)."""
+    i = wp.tid()
+    d = start(blade, hand, lateral, i)
+    devices[i] = d
+    command[i] = hand_command(action_of(actions, i), d.pitch, p)
+
+
+@wp.kernel(module="unique")
+def close_period(devices: wp.array(dtype=Device), count: int, p: Params, blade: wp.array2d(dtype=f64),
+                 hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64), hand_v: wp.array2d(dtype=f64),
+                 contact: wp.array2d(dtype=f64), incisor: wp.array(dtype=f64)):
+    """The state arrays as the period of ``count`` substeps that :func:`one_substep` ran leaves them."""
+    i = wp.tid()
+    finish(devices[i], count, p, blade, hand, lateral, hand_v, contact, incisor, i)
+
+
+@wp.kernel(module="unique")
+def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d), p: Params,
+                loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
+                local_normals: wp.array(dtype=wp.vec2d), after: wp.array(dtype=Device)):
+    """One substep of device ``i`` from ``before`` into ``after``: a launch a substep, so that a
+    :class:`warp.Tape` keeps every intermediate state for the adjoint."""
+    i = wp.tid()
+    after[i] = substep(before[i], p, command[i], loads, slopes, local, local_normals)
+
+
+def params_of(c: Constants, s: IncisorContact) -> Params:
+    """The kernel's constants from the substep's (:class:`~.physics.Constants`) and the contact's."""
+    p = Params()
+    for name in ("R", "h", "inv_m", "inv_I", "h_over_m", "k", "c", "k_t", "mu", "k_ref", "damping", "step",
+                 "inv_step", "k_rot", "c_rot"):
+        setattr(p, name, float(getattr(c, name)))
+    p.top = int(c.top)
+    p.grip = wp.vec2d(*c.grip)
+    p.heel = wp.vec2d(*c.heel)
+    p.tip = wp.vec2d(*c.tip)
+    p.low = wp.vec4d(*c.low)
+    p.high = wp.vec4d(*c.high)
+    p.end0 = wp.vec2d(*s.ends[0])
+    p.end1 = wp.vec2d(*s.ends[1])
+    p.seg_normal = wp.vec2d(*s.seg_normal)
+    p.radius = float(s.radius)
+    p.friction = float(s.friction)
+    p.slop = float(s.slop)
+    p.bias_coef = float(s.bias_coef)
+    p.dt_coef = float(s.dt_coef)
+    p.w_coef = 1.0 - math.exp(-c.c_rot * c.h * c.inv_I)
+    p.vertices = len(s.local)
+    return p
+
+
+def device_params(c: Constants, s: IncisorContact, params: LaryngoscopeParams) -> Params:
+    """:func:`params_of` with the hand's speeds at full action (what turns an action into a command)."""
+    p = params_of(c, s)
+    p.max_hand_speed, p.max_pitch_rate = params.max_hand_speed, params.max_pitch_rate
+    p.max_sweep_speed = params.max_sweep_speed
+    return p
+
+
+def kernel_constants(dev: KernelLaryngoscopes, device: Any) -> list[Any]:
+    """What every launch for the devices ``dev`` reads, on Warp's ``device``: the constants, the tongue's
+    load table and the blade's polygon (:func:`control_period`'s and :func:`one_substep`'s last arguments)."""
+    s, contact = dev.incisors, dev.contact
+    return [device_params(dev.c, s, dev.params),
+            wp.array(np.asarray(contact.loads, dtype=np.float64), dtype=f64, device=device),
+            wp.array(np.asarray(contact.slopes, dtype=np.float64), dtype=f64, device=device),
+            wp.array(s.local, dtype=wp.vec2d, device=device),
+            wp.array(s.local_normals, dtype=wp.vec2d, device=device)]
+
+
+class LaryngoscopeWarp(KernelLaryngoscopes):
+    """``n`` laryngoscopes on numpy arrays, each control period one launch of :func:`control_period` on
+    Warp's CPU device: every device equals a single pymunk device bit for bit. The state arrays are numpy
+    views of Warp arrays, so a period's launch passes no data (a recorded launch, replayed)."""
+
+    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
+        super().__init__(params, contact, n)
+        state = [wp.array(x, dtype=f64, device="cpu") for x in
+                 (self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor)]
+        self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor = (x.numpy() for x in state)
+        actions = wp.zeros((n, 4), dtype=f64, device="cpu")
+        self._actions = actions.numpy()
+        self._launch = wp.launch(control_period, n, device="cpu", record_cmd=True,
+                                 inputs=[*state, actions, self.n_substeps, *kernel_constants(self, "cpu")])
+
+    def control_step(self, actions: Any, moving: Any = None) -> None:
+        """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
+        their hands still (their results are discarded by the caller)."""
+        self._actions[:] = actions
+        if moving is not None:
+            self._actions[~moving] = 0.0
+        self._launch.launch()
+        self._forget()
