@@ -8,7 +8,7 @@ errors, and the clinical metrics): how many episodes agree bit for bit, the larg
 two-sample Kolmogorov-Smirnov test's p-value of the two distributions (scipy). With the exact engines
 every episode agrees bit for bit, so any policy (a trained agent included) scores the same on either.
 
-    python scripts/engine_agreement.py [--episodes 1000] [--engine compiled] [--policies zero random expert invert-poly2]
+    python scripts/engine_agreement.py [--episodes 1000] [--engine warp] [--policies zero random expert invert-poly2]
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def compare(scene: str, name: str, episodes: int, engine: str) -> dict[str, dict
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--episodes", type=int, default=1000)
-    parser.add_argument("--engine", default="compiled", choices=("compiled", "numpy", "pymunk"))
+    parser.add_argument("--engine", default="warp", choices=("warp", "pymunk"))
     parser.add_argument("--policies", nargs="+", default=["zero", "random", "expert", "invert-poly2"])
     parser.add_argument("--out", type=Path, default=Path("results"))
     args = parser.parse_args()

@@ -57,7 +57,7 @@ def cache_dir() -> str:
     return _CACHE
 
 
-HEAVY_MODULES = ("pymunk", "numba", "matplotlib", "torch", "scipy", "felupe")
+HEAVY_MODULES = ("pymunk", "warp", "numba", "matplotlib", "torch", "scipy", "felupe")
 
 
 @pytest.fixture(scope="session")

@@ -25,7 +25,7 @@ def masked_seeds(t: int, n: int) -> list[int | None]:
 @pytest.mark.parametrize("env_id, obs_mode, extra", [
     ("SoftSphere-v0", "vector", {}), ("SoftSphereProcedure-v0", "dict", {}),
     ("SoftSphereViscoelastic-v0", "vector", {}),
-    ("SoftSphereHaptic-v0", "vector", {"device": {"batch_engine": "compiled"}})])
+    ("SoftSphereHaptic-v0", "vector", {"device": {"batch_engine": "warp"}})])
 def test_numpy_twin_equals_sync_vector_env_through_masked_resets(env_id, obs_mode, extra):
     n = 3
     kwargs = {"obs_mode": obs_mode, "task": {"terminate_on_success": True, "tolerance": 0.5, "horizon": 30}}

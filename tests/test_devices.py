@@ -124,8 +124,8 @@ def test_the_scene_device_section_reaches_the_torch_backend():
     assert str(env.unwrapped.torch_device) == "cpu"
 
 
-@pytest.mark.parametrize("kind, engine", [("ideal", None), (PROBE, None), ("laryngoscope", "compiled"),
-                                          ("laryngoscope", "numpy"), ("laryngoscope", "pymunk")])
+@pytest.mark.parametrize("kind, engine", [("ideal", None), (PROBE, None), ("laryngoscope", "warp"),
+                                          ("laryngoscope", "pymunk")])
 def test_a_pickled_vector_env_continues_bit_for_bit(kind, engine, probe_on_path, tried):
     """Every device's batch pickles and deep-copies (the laryngoscope's engines are rebuilt from their
     state, pymunk's space too): a copy taken mid-episode continues as the original, through autoresets,

@@ -103,11 +103,11 @@ def test_same_seed_gives_bitwise_identical_rollouts(env_id):
 
 
 @pytest.mark.parametrize("autoreset, obs_mode, engine", [
-    (AutoresetMode.NEXT_STEP, "vector", "compiled"), (AutoresetMode.SAME_STEP, "vector", "compiled"),
-    (AutoresetMode.NEXT_STEP, "dict", "compiled"), (AutoresetMode.SAME_STEP, "dict", "numpy"),
+    (AutoresetMode.NEXT_STEP, "vector", "auto"), (AutoresetMode.SAME_STEP, "vector", "warp"),
+    (AutoresetMode.NEXT_STEP, "dict", "warp"), (AutoresetMode.SAME_STEP, "dict", "auto"),
     (AutoresetMode.NEXT_STEP, "vector", "pymunk")])
 def test_batched_twin_matches_single_envs(autoreset, obs_mode, engine):
-    """Every env of the twin equals a single env bit for bit on the exact engines (compiled, numpy); on
+    """Every env of the twin equals a single env bit for bit on the Warp engine (auto, warp); on
     the pymunk engine env 0 does, and envs 1 and 2 sit elsewhere in the shared space (their positions
     carry an offset, so they round differently) and agree to 1e-6."""
     n = 3
@@ -186,11 +186,19 @@ def test_bad_action_raises_and_leaves_the_state_unchanged(bad):
     ({"max_substep": 0.01}, "device.max_substep"),
     ({"haptic_preset": "phantom"}, "device.haptic_preset"),
     ({"batch_engine": "mujoco"}, "device.batch_engine"),
+    ({"batch_engine": "compiled"}, r"device.batch_engine='compiled' is retired: it was the numba kernel"),
+    ({"batch_engine": "numpy"}, r"device.batch_engine='numpy' is retired"),
     ({"stiffness": 1.0}, "valid keys"),
 ])
 def test_bad_device_parameters_name_the_key_and_range(device, match):
     with pytest.raises(ValueError, match=match):
         gym.make("SoftSphereHaptic-v0", device=device)
+
+
+def test_the_numpy_twin_refuses_the_torch_twins_engine_by_name():
+    with pytest.raises(ValueError, match=r"device.batch_engine='triton' has no numpy engine: 'triton' steps only"):
+        gym.make_vec("SoftSphereHaptic-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                     device={"batch_engine": "triton"})
 
 
 @pytest.mark.parametrize("sections", [
@@ -227,8 +235,8 @@ def test_rgb_array_shows_the_blade_beside_the_sphere_and_human_mode_draws_headle
 
 
 def test_haptic_scene_imports_pymunk_but_neither_matplotlib_nor_torch(heavy_modules_after):
-    """The single env loads pymunk alone; its batched twin numba too (its compiled engine), which loads
-    scipy (its version check, and scipy.linalg's LAPACK bindings when it compiles)."""
+    """The single env loads pymunk alone; its batched twin Warp too (its engine), and on the pymunk
+    engine not Warp."""
     single = ("import gymnasium as gym\n"
               "env = gym.make('softenv:SoftSphereHaptic-v0')\n"
               "env.reset(seed=0)\n"
@@ -236,7 +244,10 @@ def test_haptic_scene_imports_pymunk_but_neither_matplotlib_nor_torch(heavy_modu
     assert heavy_modules_after(single) == ["pymunk"]
     batch = single + ("venv = gym.make_vec('softenv:SoftSphereHaptic-v0', num_envs=2, vectorization_mode='vector_entry_point')\n"
                       "venv.reset(seed=0); venv.step(venv.action_space.sample())\n")
-    assert heavy_modules_after(batch) == ["numba", "pymunk", "scipy"]
+    assert heavy_modules_after(batch) == ["pymunk", "warp"]
+    assert heavy_modules_after(batch.replace("vectorization_mode='vector_entry_point'",
+                                             "vectorization_mode='vector_entry_point', device={'batch_engine': 'pymunk'}")) \
+        == ["pymunk"]
 
 
 def test_sb3_adapter_serves_the_haptic_twin():

@@ -188,6 +188,7 @@ def bench_sb3(quick: bool, reference: Timing) -> list[Row]:
             adapters[name].close()
         twin.close()
     rows.append(ppo_row(quick))
+    rows.append(ppo_first_run_row(quick))
     return rows
 
 
@@ -215,6 +216,36 @@ def ppo_row(quick: bool, n: int = 8) -> Row:
     return Row("sb3", f"SoftSphereHaptic-v0: SB3 PPO through the adapter, {n} envs, over PPO on CartPole-v1",
                haptic / cart, "x CartPole-v1's PPO", f"{haptic:,.0f} vs {cart:,.0f} env-steps per CPU s (rollouts and "
                "updates)", ">= 0.8x", haptic / cart >= 0.8)
+
+
+# PPO's first learn() in a fresh process on SoftSphereHaptic-v0 and CartPole-v1 (argv: steps, envs); prints
+# each env-steps per wall second, the haptic one's build, kernel load and first rollout included
+FIRST_PPO = """
+import sys, time
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_util import make_vec_env
+from softenv.envs.sb3 import SoftSphereSB3VecEnv
+steps, n = int(sys.argv[1]), int(sys.argv[2])
+for name in ("haptic", "cartpole"):
+    t0 = time.perf_counter()
+    env = SoftSphereSB3VecEnv(n, "SoftSphereHaptic-v0") if name == "haptic" else make_vec_env("CartPole-v1", n_envs=n, seed=0)
+    PPO("MlpPolicy", env, n_steps=steps // n, seed=0).learn(steps)
+    print(name, steps / (time.perf_counter() - t0))
+"""
+
+
+def ppo_first_run_row(quick: bool, n: int = 8) -> Row:
+    """:func:`ppo_row`'s PPO as a new user's first run: a fresh process (the laryngoscope's kernel loaded
+    from the disk cache the bench's earlier rows left) building the env and training once, wall time,
+    against CartPole-v1's in the same process."""
+    steps = 4096 if quick else 16384
+    out = subprocess.run([sys.executable, "-c", FIRST_PPO, str(steps), str(n)], capture_output=True, text=True,
+                         check=True).stdout
+    rate = {name: float(value) for name, value in (line.split() for line in out.strip().splitlines()[-2:])}
+    ratio = rate["haptic"] / rate["cartpole"]
+    return Row("sb3", f"SoftSphereHaptic-v0: SB3 PPO's first learn() in a fresh process, {n} envs, over CartPole-v1's",
+               ratio, "x CartPole-v1's PPO", f"{rate['haptic']:,.0f} vs {rate['cartpole']:,.0f} env-steps per wall s "
+               "(the env built, its kernel loaded from the cache)", ">= 0.8x", ratio >= 0.8)
 
 
 def state_bytes_per_env(env_id: str, n: int) -> float:
@@ -279,11 +310,11 @@ def bench_torch(quick: bool, reference: Timing) -> list[Row]:
                             f"{rate / numpy_rate:.2f}x the numpy twin"))
     n = 1024
     compiled = n / twin_step_timing(HAPTIC_ID, n, 2 if quick else 6, autoreset_mode="same_step").median
-    rows.append(Row("torch", f"{HAPTIC_ID}: numpy twin (compiled engine), {n} envs", compiled, "env-steps/s"))
-    for mode in (None,) if quick else (None, "default"):      # compiling the substep takes 1-3 min on 2 cores
+    rows.append(Row("torch", f"{HAPTIC_ID}: numpy twin (warp engine), {n} envs", compiled, "env-steps/s"))
+    for mode in (None,) if quick else (None, "default"):      # compiling the env's work takes minutes on 2 cores
         rate = n / torch_step_timing(n, "cpu", torch.float32, "device", mode, 1 if quick else 3, env_id=HAPTIC_ID,
                                      warmup=1).median
-        how = "eager" if mode is None else "substep compiled"
+        how = "warp engine, eager" if mode is None else "warp engine, the env's work compiled"
         rows.append(Row("torch", f"{HAPTIC_ID}: torch twin on cpu, {how}, float32 env, float64 device, device draw, "
                         f"{n} envs", rate, "env-steps/s", f"{rate / compiled:.2f}x the numpy twin"))
     if not torch.cuda.is_available():
@@ -353,7 +384,7 @@ HAPTIC_GPU_TARGET = 50e6         # issue 37: env-steps/s at the best batch size
 
 def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: int) -> list[Row]:
     """The laryngoscope's torch twin (float32 env, float64 device physics, device draw, same-step autoreset,
-    no action check) on ``device`` over batch sizes: the tensor engine eager, and on CUDA first the fused
+    no action check) on ``device`` over batch sizes: the Warp kernel eager, and on CUDA first the fused
     Triton kernel, eager and recorded as CUDA graphs (``cuda_graph=True``), and with the env's work compiled
     around it (``compile_options``, at the largest size only: each compile takes most of a minute), after a
     check that the default engine's steps never synchronise with the host. The best is held to the issue's
@@ -365,14 +396,14 @@ def haptic_tensor_rows(device: str, name: str, sizes: tuple[int, ...], calls: in
         synced = host_synchronisation(_torch_twin(1024, device, torch.float32, "device", env_id=HAPTIC_ID), 3)
         rows.append(Row("gpu-haptic", f"{HAPTIC_ID}: host synchronisations in a step ({name})", float(bool(synced)), "",
                         synced or "none (torch.cuda.set_sync_debug_mode('error'))", "none", not synced))
-    # on CPU the tensor engine's eager row alone (bench_torch times its compiled substep there: a compile takes
+    # on CPU the Warp kernel's eager row alone (bench_torch times the env compiled around it: a compile takes
     # minutes); on CUDA first the fused kernel (the default), eager and recorded, each with the env compiled
-    # too, then the tensor engine eager (inductor's CUDA code for its substep is refused)
+    # too, then the Warp kernel eager
     from ..devices.laryngoscope.part_tensors import fused_available  # torch and pymunk: the rl extra
 
-    variants = [("tensor engine", "numpy", False, False)]       # (engine, batch_engine, compiled, graphed)
+    variants = [("warp kernel", "warp", False, False)]       # (engine, batch_engine, compiled, graphed)
     if fused_available(torch.device(device)):
-        variants[:0] = [("fused kernel", "compiled", compiled, graphed) for compiled in (False, True)
+        variants[:0] = [("fused kernel", "triton", compiled, graphed) for compiled in (False, True)
                         for graphed in (False, True)]
     best: tuple[float, str] = (0.0, "")
     for engine, batch_engine, compiled, graphed in variants:
@@ -403,7 +434,7 @@ def device_alone_rows(device: str, name: str, n: int, calls: int) -> list[Row]:
     """The laryngoscope's torch engines alone, ``n`` devices stepped a control period at a time with
     random commands and no env around them: beside the env's rows, what the env's own work costs. On
     CUDA the fused kernel at ptxas's register count and capped (``maxnreg``: more warps an SM, more
-    spills: results/fused_kernel_sm90.md), and the tensor engine; elsewhere the tensor engine."""
+    spills: results/fused_kernel_sm90.md), and the Warp kernel; elsewhere the Warp kernel."""
     import torch                                            # torch: the rl extra
 
     from ..devices.laryngoscope.part import laryngoscope_parts  # pymunk: the rl extra
@@ -413,9 +444,9 @@ def device_alone_rows(device: str, name: str, n: int, calls: int) -> list[Row]:
     parts, torch_device = laryngoscope_parts(world.scene, world.config), torch.device(device)
     generator = torch.Generator(device=device).manual_seed(0)
     actions = [torch.rand((n, 4), generator=generator, device=device, dtype=torch.float64) * 2 - 1 for _ in range(4)]
-    variants: list[tuple[str, str, int | None]] = [("tensor engine", "numpy", None)]
+    variants: list[tuple[str, str, int | None]] = [("warp kernel", "warp", None)]
     if fused_available(torch_device):
-        variants[:0] = [("fused kernel", "compiled", cap) for cap in HAPTIC_REGISTER_CAPS]
+        variants[:0] = [("fused kernel", "triton", cap) for cap in HAPTIC_REGISTER_CAPS]
     rows = []
     for engine_name, batch_engine, cap in variants:
         label = (f"{HAPTIC_ID}: {engine_name} alone on {name}" + (f", maxnreg={cap}" if cap else "")

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from .._validation import check_choice, check_int, check_real
 from ..devices.base import device_kind
-from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES
+from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES, RETIRED_ENGINES
 from ..fem.params import FE_POISSON
 from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
@@ -61,6 +61,12 @@ def _choice(*options: Any) -> Check:
 
 def _optional(check: Callable[[Any, str], Any]) -> Callable[[Any, str], Any]:
     return lambda v, name: None if v is None else check(v, name)
+
+
+def _batch_engine(v: Any, name: str) -> str:
+    if v in RETIRED_ENGINES:
+        raise ValueError(f"{name}={v!r} is retired: it was {RETIRED_ENGINES[v]}; choose one of {list(BATCH_ENGINES)}")
+    return check_choice(v, name, BATCH_ENGINES)
 
 
 def _device_kind(v: Any, name: str) -> str:
@@ -163,11 +169,12 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "max_substep": Field(1e-3, "s", "[1e-6, 1e-3]", _real(1e-6, 1e-3), "longest physics substep (1 kHz or finer)"),
         "haptic_preset": Field("omega", "", "touch | falcon | omega", _choice("touch", "falcon", "omega"),
                                "force-feedback device whose limits shape haptic_force_N"),
-        "batch_engine": Field("compiled", "", "compiled | numpy | pymunk", _choice(*BATCH_ENGINES),
-                              "the laryngoscope batched (vector envs): compiled (numba, a loop over devices) and "
-                              "numpy (arrays) equal the single env bit for bit; pymunk (one space) agrees to rounding. "
-                              "On torch tensors: compiled is one Triton kernel a step on CUDA (the tensor engine "
-                              "elsewhere), numpy the tensor engine; pymunk has none"),
+        "batch_engine": Field("auto", "", "auto | warp | triton | pymunk", _batch_engine,
+                              "what steps the laryngoscope in vector envs and the torch twin: warp (one Warp "
+                              "kernel a step, CPU or CUDA; bit for bit with the single env on CPU), triton (one "
+                              "Triton kernel a step, torch twin on CUDA only), pymunk (one space, numpy twin only; "
+                              "agrees to rounding); auto is triton on CUDA tensors where triton is installed, warp "
+                              "elsewhere"),
     },
     "dynamics": {
         "kind": Field("quasi_static", "", "quasi_static | viscoelastic", _choice("quasi_static", "viscoelastic"),

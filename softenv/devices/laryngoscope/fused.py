@@ -1,19 +1,14 @@
 """The laryngoscope's control period as one Triton kernel, for the torch twin on a GPU: the float twin of
-:func:`.kernel.control_period` (numba, one device after another) with one GPU thread a device.
+:func:`.warp_kernel.control_period` with one GPU thread a device, each device's whole period in registers.
 
-The eager tensor engine (:class:`~.tensors.LaryngoscopeTensors`) launches some 14,000 small kernels a
-control period, each reading and writing every device's arrays, so on a GPU it is bound by launches and
-memory, not arithmetic (3 million env-steps/s at best on an H200). Here each device's whole period (some
-20 substeps of collision, arbiter, springs and solver iterations) runs in registers: its state is read
-once and written once. A branch of :func:`.kernel.control_period` is a ``tl.where`` here (both sides are
-computed; the one the device takes is kept), and its skip of the collision for a blade far from the
-incisors (:func:`.kernel._separated`) is gone: the collision finds no contact there, so the result is the
-same; and one pass over the collision's candidate edges serves both of :func:`.kernel._collide`'s (each
-hull side computed once). The expressions are :func:`.kernel.control_period`'s; the kernel is launched without
-fused multiply-add, so where the GPU's ``cos``, ``sin``, ``exp`` round as the host's the result is that
-of the numba kernel bit for bit. ``tests/test_laryngoscope_fused.py`` holds it to the numpy engine bit
-for bit in Triton's interpreter (``TRITON_INTERPRET=1``, on CPU tensors) and to the eager tensor engine
-on a GPU.
+A branch of the Warp kernel is a ``tl.where`` here (both sides are computed; the one the device takes is
+kept), and its skip of the collision for a blade far from the incisors (:func:`.warp_kernel.separated`)
+is gone: the collision finds no contact there, so the result is the same; and one pass over the
+collision's candidate edges serves both of :func:`.warp_kernel.collide`'s (each hull side computed
+once). The expressions are the Warp kernel's; this one is launched without fused multiply-add, so where
+the GPU's ``cos``, ``sin``, ``exp`` round as the host's the result is the Warp kernel's bit for bit.
+``tests/test_laryngoscope_fused.py`` holds it to the Warp kernel in Triton's interpreter
+(``TRITON_INTERPRET=1``, on CPU tensors) and on a GPU.
 
 The scene's constants (:func:`constants`) are compiled in as float64 literals, which take no registers:
 loaded from a tensor, all 77 were hoisted out of the substep loop into registers, and the kernel spilled
@@ -33,10 +28,8 @@ import triton
 import triton.language as tl
 
 from ..contact import TongueContact
-from .incisors import PERSISTENCE, TINY
 from .params import SPRING_LENGTH, LaryngoscopeParams
-from .rigid import HAND_ANCHORS
-from .space import SOLVER_ITERATIONS
+from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY
 from .tensors import LaryngoscopeTensors
 
 BLOCK = 128            # devices a program (one thread each)
@@ -55,14 +48,13 @@ _LOCAL: tl.constexpr = tl.constexpr(57)
 
 def constants(dev: LaryngoscopeTensors) -> tuple[float, ...]:
     """The kernel's constants in the layout :func:`_control_period` reads (``C``)."""
-    c, s, k = dev.c, dev._teeth.solver, dev._coupling
+    c, s, k = dev.c, dev.incisors, dev.coupling
     tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]
     coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]
-    solver = [s.radius, s.friction, s.slop, s.bias_coef, dev._teeth.dt_coef, TINY, 1e-300, SPRING_LENGTH,
+    solver = [s.radius, s.friction, s.slop, s.bias_coef, s.dt_coef, TINY, 1e-300, SPRING_LENGTH,
               float("inf")]
     anchors = [v for xy in HAND_ANCHORS for v in xy]
-    geometry = [np.asarray(a.cpu() if isinstance(a, torch.Tensor) else a, dtype=np.float64).ravel()
-                for a in (s.ends, s.seg_normal, s.local, s.local_normals)]
+    geometry = [np.asarray(a, dtype=np.float64).ravel() for a in (s.ends, s.seg_normal, s.local, s.local_normals)]
     groups = [np.array(tongue), np.array(coupling), np.array(solver), np.array(anchors), *geometry]
     starts = np.cumsum([0] + [len(g) for g in groups])
     assert [int(x) for x in starts[1:7]] == [x.value for x in (_COUPLING, _SOLVER, _ANCHORS, _ENDS, _SEG_NORMAL, _LOCAL)]
@@ -140,7 +132,7 @@ def _point(C: tl.constexpr, i, j, ca, sa, px, py, V: tl.constexpr):
 
 @triton.jit
 def _candidate(k, V: tl.constexpr):
-    """:func:`.kernel._candidate`: (segment end, blade vertex) at the start and the end of candidate edge
+    """:func:`.warp_kernel.candidate`: (segment end, blade vertex) at the start and the end of candidate edge
     ``k`` of the difference (a constant, or one index a device)."""
     edge = k < 2 * V
     return (tl.where(edge, k // V, 0), tl.where(edge, k % V, k - 2 * V),
@@ -149,7 +141,7 @@ def _candidate(k, V: tl.constexpr):
 
 @triton.jit
 def _hull_side(C: tl.constexpr, ax, ay, bx, by, ca, sa, px, py, V: tl.constexpr):
-    """:func:`.kernel._hull_side`: 1 (every point of the difference on the left of ``a -> b``), -1 (right)
+    """:func:`.warp_kernel.hull_side`: 1 (every point of the difference on the left of ``a -> b``), -1 (right)
     or 0 (points on both sides: not a hull edge)."""
     ex, ey = bx - ax, by - ay
     left = tl.full(px.shape, 1, tl.int1)
@@ -164,12 +156,12 @@ def _hull_side(C: tl.constexpr, ax, ay, bx, by, ca, sa, px, py, V: tl.constexpr)
 
 @triton.jit
 def _collide(C: tl.constexpr, ca, sa, px, py, V: tl.constexpr):
-    """:func:`.kernel._collide` for every device of the program: the normal, which contacts exist, their
+    """:func:`.warp_kernel.collide` for every device of the program: the normal, which contacts exist, their
     points (on the segment, on the blade) and features."""
     radius, tiny, far = _k(C, _SOLVER), _k(C, _SOLVER + 5), _k(C, _SOLVER + 8)
     zero = tl.zeros(px.shape, tl.float64)
     none = tl.zeros(px.shape, tl.int32)
-    # One pass over the candidates finds whether the origin is inside the hull (kernel._cores_overlap)
+    # One pass over the candidates finds whether the origin is inside the hull (warp_kernel.cores_overlap)
     # and the nearest candidate for either answer, so each hull side is computed once: inside, the
     # nearest hull edge and its side; outside, the nearest of all and its direction. A search that
     # finds none keeps its distance at infinity (d < far is false for inf and nan).
@@ -308,7 +300,7 @@ def _tongue(C: tl.constexpr, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, g
 
 @triton.jit
 def _prestep(C: tl.constexpr, anx, any_, px, py, vx, vy, w, p1x, p1y, p2x, p2y):
-    """The pre-step of one contact (:func:`.incisors.prestep`): its lever, masses, bias and bounce."""
+    """The pre-step of one contact (cpArbiterPreStep): its lever, masses, bias and bounce."""
     m_inv, i_inv, h = _k(C, _COUPLING), _k(C, _COUPLING + 1), _k(C, 1)
     slop, bias_coef = _k(C, _SOLVER + 2), _k(C, _SOLVER + 3)
     r1x, r1y = p1x - 0.0, p1y - 0.0
@@ -346,7 +338,7 @@ def _spring(C: tl.constexpr, s: tl.constexpr, cp, sp, gqx, gqy, px, py, gx, gy, 
 @triton.jit
 def _contact_impulse(C: tl.constexpr, on, rx, ry, n_mass, t_mass, bias, bounce, j_bias, jn, jt, anx, any_,
                      vx, vy, w, bvx, bvy, bw):
-    """One iteration of one contact's impulse (:func:`.incisors.apply_impulse`), where ``on``."""
+    """One iteration of one contact's impulse (cpArbiterApplyImpulse), where ``on``."""
     m_inv, i_inv, friction = _k(C, _COUPLING), _k(C, _COUPLING + 1), _k(C, _SOLVER + 1)
     vbn = (bvx + -ry * bw) * anx + (bvy + rx * bw) * any_
     vr_x, vr_y = vx + -ry * w, vy + rx * w
@@ -391,7 +383,7 @@ def _spring_damping(C: tl.constexpr, r1x, r1y, nx, ny, n_mass, v_coef, target, a
 def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, count, loads, slopes, top,
                     iterations, persistence, C: tl.constexpr, V: tl.constexpr, BLOCK_SIZE: tl.constexpr):
     """``count`` substeps of every device (the rows of the state tensors, updated in place) with the hands
-    commanded at ``command`` ``(4, n)``: :func:`.kernel.control_period`, one thread a device."""
+    commanded at ``command`` ``(4, n)``: :func:`.warp_kernel.control_period`, one thread a device."""
     rows = tl.program_id(0) * BLOCK_SIZE + tl.arange(0, BLOCK_SIZE)
     live = rows < n
     px, py, a = tl.load(blade + 6 * rows, live), tl.load(blade + 6 * rows + 1, live), tl.load(blade + 6 * rows + 2, live)
@@ -425,12 +417,12 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
             C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
             lat_y, lat_v, hand_lat, anchor, hl)
-        # rigid.coupling_step: 1. positions, spending the contact's bias velocities
+        # cpSpaceStep: 1. positions, spending the contact's bias velocities
         gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
         px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
         bvx, bvy, bw = zero, zero, zero
         ca, sa, cp, sp = tl.cos(a), tl.sin(a), tl.cos(pitch), tl.sin(pitch)
-        # incisors.prestep: collide, update the arbiter, pre-step its contacts
+        # collide, update the arbiter (cpArbiterUpdate), pre-step its contacts
         (nnx, nny, new0, new1, p1x0, p1y0, p2x0, p2y0, p1x1, p1y1, p2x1, p2y1,
          g00, g01, g10, g11) = _collide(C, ca, sa, px, py, V)
         touching = new0 | new1
@@ -453,7 +445,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         jn0, jt0 = tl.where(touching, jn_new0, jn0), tl.where(touching, jt_new0, jt0)
         jn1, jt1 = tl.where(touching, jn_new1, jn1), tl.where(touching, jt_new1, jt1)
         # the normal and the pre-step are read only where touching, so they are not carried from the
-        # substep before (the numba kernel keeps them; a device not touching never reads them)
+        # substep before (the Warp kernel keeps them; a device not touching never reads them)
         anx, any_ = nnx, nny
         r2x0, r2y0, n_mass0, t_mass0, bias0, bounce0 = _prestep(C, anx, any_, px, py, vx, vy, w,
                                                                 p1x0, p1y0, p2x0, p2y0)
@@ -473,7 +465,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         # 3. velocities
         vx, vy = vx * 1.0 + (0.0 + fx * m_inv) * h, vy * 1.0 + (0.0 + fy * m_inv) * h
         w = w * 1.0 + torque * i_inv * h
-        cached = touching & ~first                        # incisors.apply_cached
+        cached = touching & ~first                        # cpArbiterApplyCachedImpulse
         jx, jy = (anx * jn0 - any_ * jt0) * dt_coef, (anx * jt0 + any_ * jn0) * dt_coef
         on = cached & ex0
         vx, vy = tl.where(on, vx + jx * m_inv, vx), tl.where(on, vy + jy * m_inv, vy)
@@ -541,13 +533,9 @@ class LaryngoscopeFused(LaryngoscopeTensors):
         self._constants = constants(self)
         self._loads, self._slopes = (x.contiguous() for x in (self._loads, self._slopes))
         self._top = int(self.c.top)
-        self._vertices = int(self._teeth.solver.local.shape[0])
+        self._vertices = int(self.incisors.local.shape[0])
         # Triton's options for the kernel: keep enable_fp_fusion off; softenv bench tries register caps (maxnreg)
         self.launch_options: dict[str, Any] = dict(COMPILE_OPTIONS)
-
-    def compile_substep(self, options: dict[str, Any]) -> None:
-        """Nothing: the kernel is compiled already, and Triton's code is not inductor's to redo (the env
-        compiles its own work around it with ``options``)."""
 
     def kernel_arguments(self, command: torch.Tensor, count: int) -> dict[str, Any]:
         """What :func:`_control_period` is launched with for ``count`` substeps at ``command`` ``(4, n)``
@@ -560,5 +548,4 @@ class LaryngoscopeFused(LaryngoscopeTensors):
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
         command = torch.stack(torch.broadcast_tensors(vX, vY, spin, v_lat)).to(torch.float64).contiguous()
         _control_period[(triton.cdiv(self.n, BLOCK),)](**self.kernel_arguments(command, count), **self.launch_options)
-        self._touched.fill_(False)                  # the kernel starts every device's contact afresh
         self._forget()

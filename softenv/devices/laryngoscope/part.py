@@ -15,7 +15,7 @@ from ..contact import TongueContact
 from . import LARYNGOSCOPE_OBS
 from .params import LaryngoscopeParams
 from .single import Laryngoscope
-from .space import DeviceState
+from .state import DeviceState
 
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")

@@ -1,6 +1,6 @@
 """The laryngoscope as a part a vector env composes (:class:`~softenv.devices.base.DeviceBatch`), on
 the batch engine ``device.batch_engine`` names; what it shares with the single device's part is
-:mod:`.part` (a module of its own so that a single env does not load numba)."""
+:mod:`.part` (a module of its own so that a single env does not load Warp)."""
 
 from __future__ import annotations
 
@@ -11,21 +11,30 @@ import numpy as np
 from ... import clinical
 from ..base import Config, DeviceScene
 from . import LARYNGOSCOPE_OBS
-from .batch import ArrayLaryngoscopes, LaryngoscopeArrays, LaryngoscopeBatch
-from .kernel import LaryngoscopeKernel
+from .batch import ArrayLaryngoscopes, LaryngoscopeBatch
 from .part import INFO_KEYS, PickledByState, batch_report, glottic_view, in_workspace, laryngoscope_parts
-from .space import DeviceState
+from .state import DeviceState
 
-# device.batch_engine -> the batch it builds
-ENGINES: dict[str, type[ArrayLaryngoscopes]] = {"compiled": LaryngoscopeKernel, "numpy": LaryngoscopeArrays,
-                                                "pymunk": LaryngoscopeBatch}
+
+
+def batch_engine(name: str) -> type[ArrayLaryngoscopes]:
+    """The numpy twin's engine ``device.batch_engine`` names: ``auto`` and ``warp`` the Warp kernel
+    (:class:`~.warp_arrays.LaryngoscopeWarp`), ``pymunk`` one pymunk space (:class:`~.batch.LaryngoscopeBatch`)."""
+    if name == "pymunk":
+        return LaryngoscopeBatch
+    if name not in ("auto", "warp"):
+        raise ValueError(f"device.batch_engine={name!r} has no numpy engine: {name!r} steps only the torch twin's "
+                         "CUDA tensors (backend='torch', torch_device='cuda'); the numpy twin takes 'auto', 'warp' "
+                         "or 'pymunk'")
+    from .warp_arrays import LaryngoscopeWarp      # warp: only for batches on its engine
+
+    return LaryngoscopeWarp
 
 
 class LaryngoscopePartBatch(PickledByState):
     """``n`` laryngoscopes in a vector env (:class:`~softenv.devices.base.DeviceBatch`) on the engine
-    ``device.batch_engine`` names (:data:`ENGINES`): ``compiled`` (:class:`~.kernel.LaryngoscopeKernel`,
-    the default) and ``numpy`` (:class:`~.batch.LaryngoscopeArrays`) equal single devices bit for bit;
-    ``pymunk`` (:class:`~.batch.LaryngoscopeBatch`, one space) does for device 0, the others agree to
+    ``device.batch_engine`` names (:func:`batch_engine`): ``warp`` (:class:`~.warp_arrays.LaryngoscopeWarp`,
+    the default) equals single devices bit for bit; ``pymunk`` (:class:`~.batch.LaryngoscopeBatch`, one space) does for device 0, the others agree to
     rounding (each sits at its own place in the space)."""
 
     obs_names = LARYNGOSCOPE_OBS
@@ -84,7 +93,7 @@ class LaryngoscopePartBatch(PickledByState):
         self.laryngoscopes.load_state(state)
 
     def _rebuilt_for(self, n: int) -> ArrayLaryngoscopes:
-        engine = ENGINES[self._config["device"]["batch_engine"]]
+        engine = batch_engine(self._config["device"]["batch_engine"])
         return engine(*laryngoscope_parts(self._scene, self._config), n)
 
     def _rebuilt(self, state: DeviceState) -> ArrayLaryngoscopes:

@@ -11,25 +11,28 @@ import torch
 from ..base import Config, DeviceScene
 from . import BATCH_ENGINES, LARYNGOSCOPE_OBS
 from .part import INFO_KEYS, batch_report, in_workspace, laryngoscope_parts
-from .space import DeviceState
+from .state import DeviceState
 from .tensors import LaryngoscopeTensors
 
 
 def tensor_engine(batch_engine: str, torch_device: torch.device) -> type[LaryngoscopeTensors]:
-    """The torch twin's engine for ``device.batch_engine``: ``compiled`` (the default) runs each control
-    period as one Triton kernel (:class:`~.fused.LaryngoscopeFused`) on a CUDA device where Triton is
-    installed (it comes with torch's CUDA builds on Linux), and the tensor engine
-    (:class:`~.tensors.LaryngoscopeTensors`, the numpy array engine's code on torch's operations)
-    elsewhere; ``numpy`` is the tensor engine everywhere (what ``compile_options`` compiles)."""
-    if batch_engine not in ("compiled", "numpy"):
-        raise ValueError(f"device.batch_engine={batch_engine!r} has no torch engine: the torch twin takes 'compiled' "
-                         f"(a Triton kernel on CUDA) or 'numpy' (the tensor engine); {list(BATCH_ENGINES)} are the "
-                         "numpy twin's")
-    if batch_engine == "compiled" and fused_available(torch_device):
+    """The torch twin's engine ``device.batch_engine`` names on ``torch_device``: ``triton`` one Triton
+    kernel a control period (:class:`~.fused.LaryngoscopeFused`: CUDA, with triton installed); ``warp`` the
+    Warp kernel on the tensors' device (:class:`~.warp_tensors.LaryngoscopeWarpTensors`); ``auto`` triton
+    where it runs, warp elsewhere. A name the device cannot serve is refused, never swapped."""
+    if batch_engine == "triton" or (batch_engine == "auto" and fused_available(torch_device)):
+        if not fused_available(torch_device):
+            raise ValueError(f"device.batch_engine='triton' with torch_device={str(torch_device)!r}: Triton steps CUDA "
+                             "tensors only, with triton installed; choose 'warp' or 'auto'")
         from .fused import LaryngoscopeFused          # triton: optional, for CUDA devices only
 
         return LaryngoscopeFused
-    return LaryngoscopeTensors
+    if batch_engine not in ("auto", "warp"):
+        raise ValueError(f"device.batch_engine={batch_engine!r} has no torch engine: the torch twin takes 'auto', "
+                         f"'warp' or 'triton' (of {list(BATCH_ENGINES)}); 'pymunk' steps the numpy twin only")
+    from .warp_tensors import LaryngoscopeWarpTensors    # warp: only for the torch twin on its engine
+
+    return LaryngoscopeWarpTensors
 
 
 def fused_available(torch_device: torch.device) -> bool:
@@ -80,8 +83,6 @@ class LaryngoscopeTensorPart:
         return term
 
     def compile(self, options: dict[str, Any]) -> bool:
-        """Compile the engine's own step (:meth:`~.tensors.LaryngoscopeTensors.compile_substep`: the tensor
-        engine's substep; the fused kernel has nothing left to compile) and keep it apart: the env compiles
-        its work around the device's calls."""
-        self.laryngoscopes.compile_substep(options)
+        """Keep the device's step apart: its engine is a kernel already (Warp's or Triton's), so the env
+        compiles its own work around the device's calls."""
         return True

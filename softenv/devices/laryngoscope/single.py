@@ -17,7 +17,8 @@ from ..._ops import ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
 from .physics import contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
-from .space import BLADE_TYPE, INCISOR_TYPE, DeviceSpace, DeviceState, LaryngoscopeBase
+from .space import BLADE_TYPE, INCISOR_TYPE, DeviceSpace
+from .state import DeviceState, LaryngoscopeBase
 
 
 class Laryngoscope(LaryngoscopeBase):
@@ -42,6 +43,10 @@ class Laryngoscope(LaryngoscopeBase):
         self._touched = False
         self._listen_to_incisors()
         self.reset()
+
+    @property
+    def space(self) -> pymunk.Space:
+        return self._space.space
 
     def _listen_to_incisors(self) -> None:
         """Sum ``|total_impulse|`` of the blade's contact with the incisors after each substep's solve.

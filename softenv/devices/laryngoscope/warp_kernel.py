@@ -28,15 +28,11 @@ arbiter and no bias velocity. Warp caches the compiled kernels in the user's cac
 from __future__ import annotations
 
 import math
-from typing import Any
 
-import numpy as np
 import warp as wp
 
-from ..contact import TongueContact
-from .params import SPRING_LENGTH, LaryngoscopeParams
-from .physics import Constants
-from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY, IncisorContact, KernelLaryngoscopes
+from .params import SPRING_LENGTH
+from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY
 
 wp.config.log_level = wp.LOG_WARNING      # Warp greets and reports every module it loads otherwise
 wp.init()
@@ -732,72 +728,3 @@ def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d
     :class:`warp.Tape` keeps every intermediate state for the adjoint."""
     i = wp.tid()
     after[i] = substep(before[i], p, command[i], loads, slopes, local, local_normals)
-
-
-def params_of(c: Constants, s: IncisorContact) -> Params:
-    """The kernel's constants from the substep's (:class:`~.physics.Constants`) and the contact's."""
-    p = Params()
-    for name in ("R", "h", "inv_m", "inv_I", "h_over_m", "k", "c", "k_t", "mu", "k_ref", "damping", "step",
-                 "inv_step", "k_rot", "c_rot"):
-        setattr(p, name, float(getattr(c, name)))
-    p.top = int(c.top)
-    p.grip = wp.vec2d(*c.grip)
-    p.heel = wp.vec2d(*c.heel)
-    p.tip = wp.vec2d(*c.tip)
-    p.low = wp.vec4d(*c.low)
-    p.high = wp.vec4d(*c.high)
-    p.end0 = wp.vec2d(*s.ends[0])
-    p.end1 = wp.vec2d(*s.ends[1])
-    p.seg_normal = wp.vec2d(*s.seg_normal)
-    p.radius = float(s.radius)
-    p.friction = float(s.friction)
-    p.slop = float(s.slop)
-    p.bias_coef = float(s.bias_coef)
-    p.dt_coef = float(s.dt_coef)
-    p.w_coef = 1.0 - math.exp(-c.c_rot * c.h * c.inv_I)
-    p.vertices = len(s.local)
-    return p
-
-
-def device_params(c: Constants, s: IncisorContact, params: LaryngoscopeParams) -> Params:
-    """:func:`params_of` with the hand's speeds at full action (what turns an action into a command)."""
-    p = params_of(c, s)
-    p.max_hand_speed, p.max_pitch_rate = params.max_hand_speed, params.max_pitch_rate
-    p.max_sweep_speed = params.max_sweep_speed
-    return p
-
-
-def kernel_constants(dev: KernelLaryngoscopes, device: Any) -> list[Any]:
-    """What every launch for the devices ``dev`` reads, on Warp's ``device``: the constants, the tongue's
-    load table and the blade's polygon (:func:`control_period`'s and :func:`one_substep`'s last arguments)."""
-    s, contact = dev.incisors, dev.contact
-    return [device_params(dev.c, s, dev.params),
-            wp.array(np.asarray(contact.loads, dtype=np.float64), dtype=f64, device=device),
-            wp.array(np.asarray(contact.slopes, dtype=np.float64), dtype=f64, device=device),
-            wp.array(s.local, dtype=wp.vec2d, device=device),
-            wp.array(s.local_normals, dtype=wp.vec2d, device=device)]
-
-
-class LaryngoscopeWarp(KernelLaryngoscopes):
-    """``n`` laryngoscopes on numpy arrays, each control period one launch of :func:`control_period` on
-    Warp's CPU device: every device equals a single pymunk device bit for bit. The state arrays are numpy
-    views of Warp arrays, so a period's launch passes no data (a recorded launch, replayed)."""
-
-    def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int) -> None:
-        super().__init__(params, contact, n)
-        state = [wp.array(x, dtype=f64, device="cpu") for x in
-                 (self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor)]
-        self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor = (x.numpy() for x in state)
-        actions = wp.zeros((n, 4), dtype=f64, device="cpu")
-        self._actions = actions.numpy()
-        self._launch = wp.launch(control_period, n, device="cpu", record_cmd=True,
-                                 inputs=[*state, actions, self.n_substeps, *kernel_constants(self, "cpu")])
-
-    def control_step(self, actions: Any, moving: Any = None) -> None:
-        """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
-        their hands still (their results are discarded by the caller)."""
-        self._actions[:] = actions
-        if moving is not None:
-            self._actions[~moving] = 0.0
-        self._launch.launch()
-        self._forget()
