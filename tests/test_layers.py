@@ -17,7 +17,7 @@ PACKAGES = ("softenv",)     # softenv/baselines links the repository's baselines
 # what an extra (or the platform) brings: the only reasons to import inside a function
 OPTIONAL = {"pymunk", "torch", "matplotlib", "felupe", "ray", "pygame", "stable_baselines3", "yaml", "scipy",
             "tensorboard", "rich", "tqdm", "torchrl", "resource", "pyOpenHaptics", "forcedimension_core",
-            "triton", "minari", "sqlalchemy", "alembic", "starlette", "starlette_csrf", "uvicorn", "PIL"}
+            "triton", "warp", "minari", "sqlalchemy", "alembic", "starlette", "starlette_csrf", "uvicorn", "PIL"}
 
 
 def module_name(path: Path) -> str:

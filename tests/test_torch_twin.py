@@ -144,8 +144,8 @@ def test_bench_reports_the_torch_twin_beside_the_numpy_twin(tmp_path):
     assert [r.metric.split(", ")[1:3] for r in torch_rows] == [["float64", "host draw"], ["float32", "host draw"],
                                                               ["float32", "device draw"]]
     haptic = [r for r in rows if r.metric.startswith("SoftSphereHaptic-v0: torch twin on cpu")]
-    assert len(haptic) == 1 and "1024 envs" in haptic[0].metric              # beside the compiled numpy twin
-    assert any(r.metric.startswith("SoftSphereHaptic-v0: numpy twin (compiled engine)") for r in rows)
+    assert len(haptic) == 1 and "1024 envs" in haptic[0].metric              # beside the numpy twin's engine
+    assert any(r.metric.startswith("SoftSphereHaptic-v0: numpy twin (warp engine)") for r in rows)
     assert all(r.value > 0 and "x the numpy twin" in r.spread for r in torch_rows + haptic)
     gpu = [r for r in rows if "GPU" in r.metric]
     assert torch.cuda.is_available() or (gpu and "not measured" in gpu[0].spread)   # with a GPU: --device cuda
@@ -166,7 +166,7 @@ def test_bench_device_cuda_measures_the_gpu_or_says_there_is_none(tmp_path):
     assert sum(r.metric.startswith("SoftSphere-v0: torch twin on") for r in rows) == 2 * 5  # 2 sizes x 5 modes
     haptic = [r for r in rows if r.section == "gpu-haptic"]
     assert haptic[0].metric.startswith("SoftSphereHaptic-v0: host synchronisations") and haptic[0].ok
-    # the sync check; 2 sizes x 2 engines (the fused kernel, the tensor engine) x eager and recorded; the best
+    # the sync check; 2 sizes x 2 engines (the fused kernel, the Warp kernel) x eager and recorded; the best
     assert len(haptic) == 1 + 2 * 2 * 2 + 1 and haptic[-1].target == ">= 50M"
     assert sum("CUDA graph" in r.metric for r in haptic) == 4 and all(r.value > 0 for r in haptic[1:])
     assert sum("fused kernel" in r.metric for r in haptic) == 4
@@ -194,8 +194,8 @@ def test_the_gpu_rows_run_on_cpu_tensors_too():
     assert rows[1].ok is None and "needs CUDA" in rows[1].spread
     haptic = haptic_tensor_rows("cpu", "cpu", (64,), 2)
     assert [r.unit for r in haptic] == ["env-steps/s", "device-steps/s"]        # no target off CUDA
-    assert "tensor engine, eager" in haptic[0].metric and "64 envs" in haptic[0].metric
-    assert "tensor engine alone" in haptic[1].metric and "64 devices" in haptic[1].metric
+    assert "warp kernel, eager" in haptic[0].metric and "64 envs" in haptic[0].metric
+    assert "warp kernel alone" in haptic[1].metric and "64 devices" in haptic[1].metric
     assert all(r.section == "gpu-haptic" and r.value > 0 and r.ok is None for r in haptic), haptic
 
 
