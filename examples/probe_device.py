@@ -20,8 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from softenv.devices.base import Config, DeviceKind, DeviceScene
-from softenv.devices.force_box import ForceBox
+from softenv import Config, DeviceKind, DeviceScene, ForceBox
 
 PROBE_OBS = ("insertion", "lateral", "depth", "normal")
 

@@ -87,7 +87,8 @@ def _collide_poses(poses: wp.array(dtype=wp.vec3d), p: K.Params, local: wp.array
                    points: wp.array2d(dtype=wp.vec4d), exists: wp.array2d(dtype=int)):
     i = wp.tid()
     x, y, a = poses[i][0], poses[i][1], poses[i][2]
-    hit = K.collide(p, local, local_normals, wp.cos(a), wp.sin(a), x, y)
+    ca, sa = wp.cos(a), wp.sin(a)
+    hit = K.collide(p, K.world_vertices(local, p.vertices, ca, sa, x, y), K.world_normals(local_normals, p.vertices, ca, sa))
     normal[i] = wp.vec2d(hit.nx, hit.ny)
     points[i, 0] = hit.p0
     points[i, 1] = hit.p1

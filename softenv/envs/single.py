@@ -13,7 +13,7 @@ from .._ops import ScalarOps
 from .batching import check_action_one, check_seed, target_option
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
-from .task import reward_terms
+from .task import action_change, normalized_score, reward_terms
 from .world import Episodes, World
 
 _add_reduce = np.add.reduce
@@ -208,16 +208,14 @@ class SoftSphereEnv(gym.Env):
         target = self._targets[ti]
         d = b - target
         sq = float(_add_reduce(d * d))                   # the batched twin's np.sum(..., axis=-1), row by row
-        p = self._prev
-        change = (a[0] - p[0]) * (a[0] - p[0]) + (a[1] - p[1]) * (a[1] - p[1]) + (a[2] - p[2]) * (a[2] - p[2]) \
-            + (a[3] - p[3]) * (a[3] - p[3])
+        change = float(action_change(np.array(a), np.array(self._prev)))
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, self._sq_ref[ti], normal, sideways, change,
                                                                        w.weights, ScalarOps)
         self._agent_cum += ratio
         self._peak = force if force > self._peak else self._peak
         hi = min(t, w.horizon - 1)
         zero, oracle = self._zero_cum[hi], self._oracle_cum[hi]
-        score = 100.0 * (zero - self._agent_cum) / max(zero - oracle, 1e-12)
+        score = normalized_score(zero, oracle, self._agent_cum, ScalarOps)
         success = ratio < w.tolerance
         self._t, self._b, self._prev, self._features, self._last_target = t + 1, b, a, f, target
         info = {"reward_shape": shape, "reward_force": force_term, "reward_smooth": smooth,

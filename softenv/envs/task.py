@@ -101,6 +101,22 @@ def procedure_features(target: Any, t: Any, start_insertion: float, ops: Ops) ->
                       target[..., 2] * (0.1 + 0.9 * press), target[..., 3] * sweep])
 
 
+def action_change(a: Any, prev: Any) -> Any:
+    """``||a - prev||^2`` over the action's components (the last axis), summed in order: the same bits on
+    arrays and tensors, a row or a batch."""
+    c = a - prev
+    total = c[..., 0] * c[..., 0]
+    for i in range(1, c.shape[-1]):
+        total = total + c[..., i] * c[..., i]
+    return total
+
+
+def normalized_score(zero_cum: Any, oracle_cum: Any, agent_cum: Any, ops: Ops) -> Any:
+    """The normalised score of the episode so far from the cumulative shape-error ratios of the
+    zero-force policy, the oracle and the agent: 0 for the zero-force policy, 100 for the oracle."""
+    return 100.0 * (zero_cum - agent_cum) / ops.clip(zero_cum - oracle_cum, 1e-12, math.inf)
+
+
 def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,
                  weights: dict[str, float], ops: Ops) -> tuple[Any, Any, Any, Any, Any, Any]:
     """Reward and its terms from squared b-space distances (scalars or arrays alike).

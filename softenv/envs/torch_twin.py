@@ -45,7 +45,7 @@ from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
 from .batching import check_actions, disabled_step_check, episode_limit, reset_mask_option
 from .config import scene_config
-from .task import reward_terms
+from .task import action_change, normalized_score, reward_terms
 from .torch_graph import GraphedStep
 from .._torch_ops import TorchOps
 from .torch_parts import DeviceEpisodes, HostEpisodes, keep, sum_dtype
@@ -274,13 +274,12 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         b = w.dynamics.step(z, g)
         d = b - target
         sq = torch.sum(d * d, dim=-1)
-        c = a - self._prev
-        change = torch.sum(c * c, dim=-1)
+        change = action_change(a, self._prev)
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways,
                                                                        change, w.weights, TorchOps)
         agent_cum = self._agent_cum + ratio.to(torch.float64)
         peak = torch.maximum(self._peak, force)
-        score = 100.0 * (zero - agent_cum) / torch.clamp(zero - oracle, min=1e-12)
+        score = normalized_score(zero, oracle, agent_cum, TorchOps)
         success = ratio < w.tolerance
         s = stepped
         rows = s[:, None]

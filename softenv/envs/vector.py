@@ -16,7 +16,7 @@ from .batching import (add_masked, check_actions, disabled_step_check, episode_l
 from .batching import autoreset_mode as autoreset_mode_of
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
-from .task import reward_terms
+from .task import action_change, normalized_score, reward_terms
 from .world import World
 
 
@@ -163,14 +163,13 @@ class SoftSphereVectorEnv(VectorEnv):
         target, sq_ref = self._targets(ep.target_b), self._targets(ep.sq_ref)
         d = np.subtract(b, target, out=self._diff)
         sq = np.sum(np.multiply(d, d, out=d), axis=-1)
-        c = a - self._prev
-        change = c[:, 0] * c[:, 0] + c[:, 1] * c[:, 1] + c[:, 2] * c[:, 2] + c[:, 3] * c[:, 3]
+        change = action_change(a, self._prev)
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways, change,
                                                                        w.weights, ArrayOps)
         agent_cum = self._agent_cum + ratio
         peak = np.maximum(self._peak, force)
         hi = np.minimum(self._t, w.horizon - 1)
-        score = w.score(ep.zero_cum[rows, hi], ep.oracle_cum[rows, hi], agent_cum)
+        score = normalized_score(ep.zero_cum[rows, hi], ep.oracle_cum[rows, hi], agent_cum, ArrayOps)
         success = ratio < w.tolerance
         # commit the stepped envs only (next-step autoreset leaves the others to _start below)
         s = stepped

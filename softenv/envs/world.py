@@ -256,6 +256,3 @@ class World:
                              f"[{self.family.low.tolist()}, {self.family.high.tolist()}]")
         return np.clip(f, self.family.low, self.family.high)
 
-    def score(self, zero_cum: Any, oracle_cum: Any, agent_cum: Any) -> Any:
-        """Normalised score: 0 for the zero-force policy, 100 for the oracle (shape term only)."""
-        return 100.0 * (zero_cum - agent_cum) / np.maximum(zero_cum - oracle_cum, 1e-12)

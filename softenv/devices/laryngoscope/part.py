@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ... import clinical
+from ..._ops import PhysicsOps, ScalarOps
 from ..base import Config, DeviceScene
 from ..contact import TongueContact
 from . import LARYNGOSCOPE_OBS
@@ -40,11 +41,11 @@ def incisor_term(incisor_force: Any, weights: dict[str, float]) -> Any:
     return -weights["incisor_weight"] * (incisor_force / weights["safe_force"])
 
 
-def in_workspace(features: Any, touching: Any, low: Any, high: Any, rest: Any, xp: Any) -> Any:
-    """A batch's force features ``(n, 4)`` clipped to the scene's workspace, the rest features where a device
-    does not touch the tongue (numpy, or torch through ``array_api_compat``: ``xp``)."""
-    clipped = xp.minimum(xp.maximum(features, low), high)
-    return xp.where(touching[:, None], clipped, rest)
+def in_workspace(features: Any, touching: Any, low: Any, high: Any, rest: Any, ops: PhysicsOps) -> Any:
+    """A batch's force features ``(n, 4)`` clipped to the scene's workspace (``ops.clip``, as the single
+    device clips each of its own: ``ArrayOps`` or ``TorchOps`` here), the rest features where a device
+    does not touch the tongue."""
+    return ops.where(touching[:, None], ops.clip(features, low, high), rest)
 
 
 def batch_report(dev: Any, weights: dict[str, float], cast: Any = None) -> tuple[Any, dict[str, Any]]:
@@ -112,7 +113,7 @@ class LaryngoscopePart(PickledByState):
         if f is None:
             return self._rest, P, Q
         lo, hi = self._box
-        return [min(max(x, low), high) for x, low, high in zip(f, lo, hi)], P, Q
+        return [ScalarOps.clip(x, low, high) for x, low, high in zip(f, lo, hi)], P, Q
 
     def observation(self, features: list[float]) -> list[float]:
         return self.laryngoscope.observation()

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from ... import clinical
+from ..._ops import ArrayOps
 from ..base import Config, DeviceScene
 from . import LARYNGOSCOPE_OBS
 from .batch import ArrayLaryngoscopes, LaryngoscopeBatch
@@ -63,7 +64,7 @@ class LaryngoscopePartBatch(PickledByState):
         dev, box = self.laryngoscopes, self._workspace
         dev.control_step(actions, moving=stepped)
         features, touching = dev.features()
-        return in_workspace(features, touching, box.low, box.high, self._rest, np), dev.normal_force, dev.sideways_force
+        return in_workspace(features, touching, box.low, box.high, self._rest, ArrayOps), dev.normal_force, dev.sideways_force
 
     def observation(self, features: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         obs = self.laryngoscopes.observation()

@@ -71,7 +71,7 @@ class LaryngoscopeTensorPart:
         dev = self.laryngoscopes
         dev.control_step(actions.to(torch.float64), moving=stepped)
         features, touching = dev.features()
-        f = in_workspace(features, touching, self._low, self._high, self._rest, dev.xp)
+        f = in_workspace(features, touching, self._low, self._high, self._rest, dev.ops)
         return f.to(self.dtype), dev.normal_force.to(self.dtype), dev.sideways_force.to(self.dtype)
 
     def observation(self, features: torch.Tensor) -> torch.Tensor:

@@ -14,7 +14,7 @@ from ..contact import TongueContact
 from .params import LaryngoscopeParams
 from .physics import Constants
 from .state import IncisorContact, KernelLaryngoscopes
-from .warp_kernel import Params, control_period, f64
+from .warp_kernel import MAX_VERTICES, Params, control_period, f64
 
 
 def params_of(c: Constants, s: IncisorContact) -> Params:
@@ -38,6 +38,8 @@ def params_of(c: Constants, s: IncisorContact) -> Params:
     p.bias_coef = f64(s.bias_coef)
     p.dt_coef = f64(s.dt_coef)
     p.w_coef = f64(1.0 - math.exp(-c.c_rot * c.h * c.inv_I))
+    if len(s.local) > MAX_VERTICES:
+        raise ValueError(f"the blade's outline has {len(s.local)} vertices; the Warp kernel holds at most {MAX_VERTICES}")
     p.vertices = len(s.local)
     return p
 
