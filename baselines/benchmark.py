@@ -477,7 +477,7 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"method from the scripted expert's actions (`baselines.planner.TrajectoryOracle`, {_oracle_text(plan)}; "
           "its decision time is its planning time per control step). Decision time: one observation, median.\n",
           format_table(summaries), "",
-          *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.clinical`; mean [95 % interval]):\n",
+          *(["Clinical metrics on the laryngoscope scenes (per episode, `softenv.devices.laryngoscope.clinical`; mean [95 % interval]):\n",
              format_clinical(summaries), ""] if any(CLINICAL[0] in s for s in summaries) else []),
           *(["Agents by training seed (normalized score, mean [95 % bootstrap interval] over each seed's test "
              "episodes; the table above pools them):\n", format_seeds(summaries), ""]

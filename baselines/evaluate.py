@@ -23,7 +23,7 @@ SPLIT = "test"
 TRAIN_SPLIT = "train"          # the targets agents train on, and offline datasets record
 
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
-# the laryngoscope scenes' clinical metrics (softenv.clinical), from info["clinical"] at each episode's end
+# the laryngoscope scenes' clinical metrics (softenv.devices.laryngoscope.clinical), from info["clinical"] at each episode's end
 CLINICAL = ("peak_tongue_force_N", "mean_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N",
             "incisor_contact_s", "lever_share", "duration_s", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
 

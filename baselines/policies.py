@@ -16,7 +16,7 @@ interface through :class:`SB3Policy`.
 
 On the laryngoscope scenes (``device.kind = "laryngoscope"``) the action moves a hand, not the
 force: there every force-giving policy above hands its force (the paper's haptic link used in
-reverse: target ``b*`` -> force) to :class:`softenv.control.HandController`, which realises it
+reverse: target ``b*`` -> force) to :class:`softenv.devices.laryngoscope.control.HandController`, which realises it
 through the blade by the textbook sequence (insert, lift along the handle, sweep). ``expert`` is
 that controller on the exact response's inversion: the scripted expert, a clinician who knows
 which force gives which shape. ``oracle`` is the ideal device's, so it is not offered there; the
@@ -30,7 +30,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from softenv.control import HAND_POSE, HandController
+from softenv.devices.laryngoscope.control import HAND_POSE, HandController
 from softenv.envs.world import World
 from softenv.response import ResponseModel, make_response
 

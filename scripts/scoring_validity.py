@@ -150,7 +150,7 @@ def main() -> None:
             for name, values in graded.items()],
           "| lever | lever share (clinical) | " + " | ".join(f"{v:.3f}" for v in lever_share) + " |", "",
           "The lever share is the share of the hand's moment about the incisal edge applied while the blade bears on "
-          "the incisors (`softenv.clinical`): 0 while the hand presses down along the handle; once the hand stops "
+          "the incisors (`softenv.devices.laryngoscope.clinical`): 0 while the hand presses down along the handle; once the hand stops "
           "pressing down and turns the blade, the flange comes to bear on the teeth, the fulcrum of the lever, and "
           "the share jumps to about 1, with the incisor force that empties the teeth part.\n",
           "Against published clinical data (`softenv.training.profiles`): each profile degrades the expert's log by "

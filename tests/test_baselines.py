@@ -9,7 +9,7 @@ from softenv.baselines.agents import _literal_dict, hyperparams, load_agent, tra
 from softenv.baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run, seed_label
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
-from softenv.control import HandController
+from softenv.devices.laryngoscope.control import HandController
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 
@@ -375,7 +375,7 @@ def test_the_baselines_load_without_pymunk(heavy_modules_after):
     """``softenv[rl]`` without the device extra: the baselines import neither pymunk (the laryngoscope's
     observation scales live outside its module) nor torch; the torch PPO's driver (baselines/ppo_torch.py)
     imports them, and on a machine without pymunk failed."""
-    code = "import softenv.baselines.benchmark, softenv.baselines.policies, softenv.baselines.evaluate, softenv.control\n"
+    code = "import softenv.baselines.benchmark, softenv.baselines.policies, softenv.baselines.evaluate, softenv.devices.laryngoscope.control\n"
     assert heavy_modules_after(code) == []
 
 

@@ -13,7 +13,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import softenv  # noqa: F401  (registers the ids)
-from softenv import clinical
+from softenv.devices.laryngoscope import clinical
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION
 from softenv.geometry import make_mesh
 from softenv.training.hand import action_toward, haptic_env

@@ -177,7 +177,7 @@ def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it(expert_lo
     hand pose) it gives the same shape error at every step."""
     import gymnasium as gym
 
-    from softenv.control import HandController
+    from softenv.devices.laryngoscope.control import HandController
 
     env = gym.make("SoftSphereHaptic-v0").unwrapped
     world = env.world

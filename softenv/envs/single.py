@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 
 from .._ops import ScalarOps
-from .batching import check_action_one, check_seed, target_option
+from .checks import check_action_one, check_seed, target_option
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .task import action_change, normalized_score, reward_terms
@@ -129,7 +129,7 @@ class SoftSphereEnv(gym.Env):
     The laryngoscope adds ``tongue_force_N``, ``incisor_force_N`` (mean over the control period),
     ``haptic_force_N`` (``(3,)``, world x, y, z: what the ``device.haptic_preset`` device would render
     to the hand), ``blade_pose`` (``(4,)``: x, z (m), pitch (rad), lateral y (m)), and at an episode's
-    last step ``clinical``, the episode's clinical metrics (:mod:`softenv.clinical`).
+    last step ``clinical``, the episode's clinical metrics (:mod:`softenv.devices.laryngoscope.clinical`).
 
     ## Arguments
 

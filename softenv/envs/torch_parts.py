@@ -23,7 +23,8 @@ import numpy as np
 import torch
 
 from .._torch_ops import TorchOps
-from .batching import check_seeds, seeded_episodes, target_option
+from .batching import seeded_episodes
+from .checks import check_seeds, target_option
 from .task import procedure_features
 from .world import World
 

@@ -43,7 +43,8 @@ from gymnasium.vector.utils import batch_space
 from ..devices.base import DeviceTensors
 from ..response import TabulatedResponse
 from .batching import autoreset_mode as autoreset_mode_of
-from .batching import check_actions, disabled_step_check, episode_limit, reset_mask_option
+from .batching import disabled_step_check, episode_limit, reset_mask_option
+from .checks import check_actions
 from .config import scene_config
 from .task import action_change, normalized_score, reward_terms
 from .torch_graph import GraphedStep

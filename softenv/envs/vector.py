@@ -11,8 +11,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .._ops import ArrayOps
-from .batching import (add_masked, check_actions, disabled_step_check, episode_limit, obs_copy, obs_row, reset_mask_option,
+from .batching import (add_masked, disabled_step_check, episode_limit, obs_copy, obs_row, reset_mask_option,
                        seeded_episodes)
+from .checks import check_actions
 from .batching import autoreset_mode as autoreset_mode_of
 from .config import scene_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode

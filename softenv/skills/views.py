@@ -28,7 +28,7 @@ FRAMES = 30                     # frames in a replay's animation, whatever the s
 PLAYBACK_S = 6.0                # how long one pass of the animation lasts
 _RENDER = threading.Lock()      # the scene renderer draws through pyplot, which is not thread-safe
 
-# the clinical metrics a trainee's page plots, with their units (the keys of softenv.clinical's summary)
+# the clinical metrics a trainee's page plots, with their units (the keys of softenv.devices.laryngoscope.clinical's summary)
 METRIC_LABELS = {
     "peak_tongue_force_N": "peak tongue force (N)", "mean_tongue_force_N": "mean tongue force (N)",
     "tongue_force_time_Ns": "tongue force-time (N s)", "peak_incisor_force_N": "peak incisor force (N)",

@@ -6,7 +6,7 @@ A frame (1280 x 720 px) has four parts:
   (dashed green), the blade and handle drawn as a laryngoscope (the light at the blade's tip), the
   hand, the upper incisors (red, with the force, while the blade touches them), and the line of sight
   from the laryngoscopist's eye to the glottis, green where it is clear (the glottic view,
-  :func:`softenv.clinical.glottic_view`). It is sized to the hand's whole workspace at every wrist
+  :func:`softenv.devices.laryngoscope.clinical.glottic_view`). It is sized to the hand's whole workspace at every wrist
   angle, so nothing leaves it;
 * **the tongue in 3D**, seen from the mouth, coloured by how far each point still is from the target,
   the target as a green wireframe: the press and the sideways sweep both show here;
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import clinical
+from ..devices.laryngoscope import clinical
 from ..projection import View, capsule, shaded_faces, visible_edges
 from .inputs import CONTROLS
 

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import clinical
+from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
 from ..envs.config import make_config, scene_sections
@@ -103,7 +103,7 @@ def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
 @dataclass
 class Replay:
     """A trajectory replayed through a scene: per-step series and the summary metrics. ``clinical``
-    (:mod:`softenv.clinical`) and ``incisor_N`` exist for hand-pose logs only."""
+    (:mod:`softenv.devices.laryngoscope.clinical`) and ``incisor_N`` exist for hand-pose logs only."""
 
     time_s: np.ndarray
     error_mm: np.ndarray

@@ -1,6 +1,6 @@
 """Synthetic trainees on the laryngoscope: the scripted expert's hand log and graded errors of technique.
 
-:func:`expert_hand_log` runs :class:`softenv.control.HandController` (insert, lift along the handle,
+:func:`expert_hand_log` runs :class:`softenv.devices.laryngoscope.control.HandController` (insert, lift along the handle,
 sweep right) toward the scene's family-centre target and records the hand's pose every control
 period, as a haptic device would (the :data:`softenv.training.logs.HAND_LOG` schema). :func:`degrade` adds
 the errors a trainee makes, each by an amount that grades it (0 = none):
@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_int, check_real
-from ..control import HandController
+from ..devices.laryngoscope.control import HandController
 from .hand import hand_limits, haptic_config, haptic_env, relative_hand_pose, speed_limited
 from .logs import HAND_LOG, Schema, check_table
 

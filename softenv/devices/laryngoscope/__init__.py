@@ -13,12 +13,14 @@ A package split by job; only the modules marked pymunk import it, and each engin
   or CUDA, and the gradients'; :mod:`.warp_tensors` runs it on the torch twin's tensors (torch).
 * :mod:`.tensors` -- the state on torch tensors; :mod:`.fused` -- each control period one Triton kernel on
   CUDA tensors (triton).
+* :mod:`.clinical` -- the clinical metrics of an episode; :mod:`.control` -- the hand controller that
+  realises a force (the scripted expert's skill): numpy only, for readers without pymunk.
 * :mod:`.part` -- the env-facing parts (the device contract of :mod:`softenv.devices.base`): workspace
   clip, the incisor reward term, info keys, the clinical record (pymunk); :mod:`.part_batch` the
   batch's, on the engine ``device.batch_engine`` names; :mod:`.part_tensors` the torch twin's (torch).
 
 This module holds the kind, the batch engines' names (:data:`LARYNGOSCOPE`) and the observation's names and scales, so readers
-of the observation (:mod:`softenv.control`, the baselines) load without pymunk.
+of the observation (:mod:`softenv.devices.laryngoscope.control`, the baselines) load without pymunk.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The laryngoscope as a part an env composes (the contract of :mod:`softenv.devices.base`), for one
 device (the batch's part is :mod:`.part_batch`): the contact's force features clipped to the scene's
 workspace, the incisor reward term, the info keys, and the clinical record of each episode
-(:mod:`softenv.clinical`)."""
+(:mod:`softenv.devices.laryngoscope.clinical`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ... import clinical
+from . import clinical
 from ..._ops import PhysicsOps, ScalarOps
 from ..base import Config, DeviceScene
 from ..contact import TongueContact
@@ -31,7 +31,7 @@ def laryngoscope_parts(scene: DeviceScene, config: Config) -> tuple[Laryngoscope
 
 
 def glottic_view(scene: DeviceScene, b: np.ndarray) -> float:
-    """The glottic-view proxy (%) of the tongue's shape ``b`` (:func:`softenv.clinical.glottic_view`)."""
+    """The glottic-view proxy (%) of the tongue's shape ``b`` (:func:`softenv.devices.laryngoscope.clinical.glottic_view`)."""
     vertices = scene.shape_model.decode(b) / scene.tissue.radius
     return clinical.glottic_view(clinical.sagittal_profile(vertices, scene.mesh.triangles), 1.0)
 

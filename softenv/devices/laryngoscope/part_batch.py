@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ... import clinical
+from . import clinical
 from ..._ops import ArrayOps
 from ..base import Config, DeviceScene
 from . import LARYNGOSCOPE_OBS

@@ -171,7 +171,7 @@ class LaryngoscopeBase:
         return kinetic + coupling + tongue
 
     def clinical_values(self) -> tuple[Any, ...]:
-        """Each device's values in :data:`softenv.clinical.COLUMNS` order: tongue and incisor force (N),
+        """Each device's values in :data:`softenv.devices.laryngoscope.clinical.COLUMNS` order: tongue and incisor force (N),
         the hand's x, z and lateral y (m), and the moments (N m) about the incisal edge of the
         coupling's pull on the blade, split into the wrist's (rotary spring and damper: levering)
         and that of the force at the grip (lifting)."""

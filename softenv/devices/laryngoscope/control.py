@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from .devices.laryngoscope import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
+from . import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
 
 # the device slice of the observation (softenv.devices.laryngoscope.LARYNGOSCOPE_OBS)
 _BLADE_PITCH, _HAND_X, _HAND_PITCH, _HAND_Y, _NORMAL, _SIDEWAYS, _INCISOR = 2, 8, 10, 11, 12, 13, 14
