@@ -30,6 +30,7 @@ import sys
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any, Callable
 
 import numpy as np
@@ -43,6 +44,7 @@ from softenv.envs.world import World
 from .evaluate import PROTOCOL_VERSION, Episodes, evaluate, scene_kwargs, episode_seeds
 from .planner import TrajectoryOracle
 from .policies import PlanningOracle, ZeroPolicy, make_baseline
+from ..sections import SceneConfig
 
 ANCHORS_FORMAT = "softenv-anchors"
 ANCHORS_VERSION = 1
@@ -75,14 +77,14 @@ class Anchors:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def scene_config(scene: str) -> dict[str, dict[str, Any]]:
+def scene_config(scene: str) -> SceneConfig:
     """The full config of a benchmark scene on its test targets."""
     _, kwargs = scene_kwargs(scene)
     kwargs.pop("obs_mode")
     return make_config(**kwargs)
 
 
-def scene_hash(config: dict[str, dict[str, Any]]) -> str:
+def scene_hash(config: Mapping[str, Any]) -> str:
     """A digest of the sections a scene's error sums depend on (:data:`ANCHOR_SECTIONS`)."""
     return hashlib.sha256(config_key(config, ANCHOR_SECTIONS).encode()).hexdigest()[:16]
 

@@ -57,7 +57,7 @@ class HapticLoop:
         self.device = Laryngoscope(params, contact)
         self.period = 1.0 / rate
         dyn = self.world.config["dynamics"]
-        self._dynamics = {"kind": dyn["kind"], "relaxed_fraction": dyn["relaxed_fraction"],
+        self._dynamics: dict[str, Any] = {"kind": dyn["kind"], "relaxed_fraction": dyn["relaxed_fraction"],
                           "time_constant": dyn["time_constant"]}
         self._low, self._high = params.hand_box
         self.reset()

@@ -28,8 +28,9 @@ from ..geometry import SphereMesh
 from ..shape_model import ShapeModel
 from ..tissue import TissueParams
 from .contact import ContactCurve
+from ..sections import SceneConfig
 
-Config = dict[str, dict[str, Any]]
+Config = SceneConfig
 
 
 class DeviceScene(Protocol):

@@ -13,7 +13,8 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import Any, Callable
+from collections.abc import Mapping
+from typing import Any, Callable, cast
 
 from .._validation import check_choice, check_int, check_real
 from ..devices.base import device_kind
@@ -21,6 +22,7 @@ from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES, RETIRED_ENGINES
 from ..fem.params import FE_POISSON
 from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
+from ..sections import SceneConfig
 from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
 
 
@@ -216,15 +218,17 @@ SCHEMA: dict[str, dict[str, Field]] = {
 }
 
 
-def default_config() -> dict[str, dict[str, Any]]:
+def default_config() -> SceneConfig:
     """The default scene (SoftSphere-v0), as a fresh nested dict."""
-    return {section: {key: copy.deepcopy(f.default) for key, f in fields.items()} for section, fields in SCHEMA.items()}
+    return cast(SceneConfig, {section: {key: copy.deepcopy(f.default) for key, f in fields.items()}
+                              for section, fields in SCHEMA.items()})
 
 
-def make_config(base: dict[str, dict[str, Any]] | None = None, **overrides: Any) -> dict[str, dict[str, Any]]:
+def make_config(base: Mapping[str, Any] | None = None, **overrides: Any) -> SceneConfig:
     """Merge ``overrides`` (section -> {key: value}) into ``base`` (default: the defaults) and validate."""
     check_sections(overrides, "make_config()")
-    config = copy.deepcopy(base) if base is not None else default_config()
+    config: dict[str, dict[str, Any]] = copy.deepcopy(
+        {s: dict(v) for s, v in cast(Mapping[str, Mapping[str, Any]], base if base is not None else default_config()).items()})
     for section, values in overrides.items():
         if not isinstance(values, dict):
             raise ValueError(f"scene section {section!r} must be a dict of settings, got {values!r}; "
@@ -256,14 +260,14 @@ def scene_sections(scene: Any, name: str = "scene") -> dict[str, Any]:
 
 
 def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any],
-                 caller: str = "make_config()") -> dict[str, dict[str, Any]]:
+                 caller: str = "make_config()") -> SceneConfig:
     """An env's config: its registered scene overrides, then the caller's sections, merged key by key.
     ``caller`` names the constructor in the error for an unknown keyword."""
     check_sections(sections, caller)
     return make_config(make_config(**(base_scene or {})), **sections)
 
 
-def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+def validate_config(config: Mapping[str, Any]) -> SceneConfig:
     """Check every value and the constraints between them; returns the normalised config."""
     out: dict[str, dict[str, Any]] = {}
     for section, fields in SCHEMA.items():
@@ -283,7 +287,7 @@ def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, An
                          f"{design:.2g} of its radius; at least {MIN_DESIGN_INDENTATION:g} is needed to resolve the "
                          "deformations: lower tissue.E or raise device.max_normal_force")
     if t["model"] == "fem":
-        _check_fem(out)
+        _check_fem(cast(SceneConfig, out))
     if task["target_normal_force"] == (0.0, 0.0) and task["target_sideways_force"] == (0.0, 0.0):
         raise ValueError("task.target_normal_force and task.target_sideways_force are both (0, 0): every target "
                          "would be the rest shape; give the target family a force")
@@ -299,17 +303,17 @@ def validate_config(config: dict[str, dict[str, Any]]) -> dict[str, dict[str, An
         a, b = task[key]
         if a < lo or b > hi:
             raise ValueError(f"task.{key}={task[key]!r} must lie within the device range [{lo:g}, {hi:g}]")
-    return out
+    return cast(SceneConfig, out)
 
 
-def material(tissue: dict[str, Any]) -> tuple[float, float]:
+def material(tissue: Mapping[str, Any]) -> tuple[float, float]:
     """``(E, nu)`` of a tissue section, its model's defaults where they are None: nu 0.45 (analytic) or
     0.49 (fem: nearly incompressible), E such that 40 N indents 40 % of the default radius at that nu."""
     nu = tissue["nu"] if tissue["nu"] is not None else (FE_POISSON if tissue["model"] == "fem" else TONGUE_POISSON)
     return (tissue["E"] if tissue["E"] is not None else effective_modulus(nu=nu)), nu
 
 
-def _check_fem(config: dict[str, dict[str, Any]]) -> None:
+def _check_fem(config: SceneConfig) -> None:
     """The limits of the finite-element tongue (softenv.fem.params.FEParams) and of its data's ramps."""
     t, n_loads = config["tissue"], config["shape_model"]["n_loads"]
     if t["law"] != "linear":
@@ -341,7 +345,7 @@ def _keys_help(section: str) -> str:
 FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of an analytic scene's key)
 
 
-def config_key(config: dict[str, dict[str, Any]], sections: tuple[str, ...]) -> str:
+def config_key(config: Mapping[str, Any], sections: tuple[str, ...]) -> str:
     """A stable text key of some sections (for caches and saved agents). An analytic tissue is keyed
     as before the fem model existed (resolved E and nu, no FE keys), and a device batched by an exact
     engine as before ``device.batch_engine`` existed, so caches and agents made then stay valid."""

@@ -12,6 +12,7 @@ place of the analytic workspace sample; its exact response is their RBF interpol
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -30,6 +31,7 @@ from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedRespo
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
 from .config import config_key, material
+from ..sections import SceneConfig
 
 _SCENES: dict[str, "Scene"] = {}
 DEVICE_BOX_KEYS = ("insertion_deg", "lateral_deg", "max_normal_force", "max_sideways_force")
@@ -39,7 +41,7 @@ DEVICE_BOX_KEYS = ("insertion_deg", "lateral_deg", "max_normal_force", "max_side
 class Scene:
     """The immutable offline parts of an environment (shared by every env of the same config)."""
 
-    config: dict
+    config: SceneConfig
     mesh: SphereMesh
     tissue: TissueParams
     layout: DorsumLayout
@@ -106,7 +108,7 @@ def degrees_to_features(commands: Any, radius: float) -> np.ndarray:
     return out
 
 
-def device_workspace(config: dict) -> Workspace:
+def device_workspace(config: SceneConfig) -> Workspace:
     """The device's box in force-feature units, from the config's degrees and newtons."""
     dev, R = config["device"], config["tissue"]["radius"]
     low = degrees_to_features([dev["insertion_deg"][0], -dev["lateral_deg"], 0.0, -dev["max_sideways_force"]], R)
@@ -115,7 +117,7 @@ def device_workspace(config: dict) -> Workspace:
     return Workspace(tuple(low.tolist()), tuple(high.tolist()))
 
 
-def fe_request(config: dict) -> FERequest:
+def fe_request(config: SceneConfig) -> FERequest:
     """What a tissue.model="fem" scene's FE data are computed from: the tissue section's material and
     geometry on ``fe_cells``, the scene's surface mesh and device box, its workspace sampling."""
     t, sm_cfg = config["tissue"], config["shape_model"]
@@ -127,11 +129,12 @@ def fe_request(config: dict) -> FERequest:
                      sm_cfg["n_loads"] // RAMP_STEPS, sm_cfg["seed"])
 
 
-def build_scene(config: dict, progress: bool = False) -> Scene:
+def build_scene(config: SceneConfig, progress: bool = False) -> Scene:
     """The scene for a validated config (memoised per process, files cached on disk)."""
     # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not)
     t = config["tissue"]
-    box = {"device": {k: config["device"][k] for k in DEVICE_BOX_KEYS}}
+    device: Mapping[str, Any] = config["device"]
+    box = {"device": {k: device[k] for k in DEVICE_BOX_KEYS}}
     key = config_key({**config, **box}, ("tissue", "mesh", "shape_model", "response", "device"))
     if key in _SCENES:
         return _SCENES[key]

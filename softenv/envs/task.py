@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._ops import ArrayOps, Ops
+from ..sections import RewardSection
 
 
 class Dynamics:
@@ -118,7 +119,7 @@ def normalized_score(zero_cum: Any, oracle_cum: Any, agent_cum: Any, ops: Ops) -
 
 
 def reward_terms(sq_dist: Any, sq_ref: Any, normal: Any, sideways: Any, sq_action_change: Any,
-                 weights: dict[str, float], ops: Ops) -> tuple[Any, Any, Any, Any, Any, Any]:
+                 weights: RewardSection, ops: Ops) -> tuple[Any, Any, Any, Any, Any, Any]:
     """Reward and its terms from squared b-space distances (scalars or arrays alike).
 
     Returns ``(reward, shape_term, force_term, smooth_term, error_ratio, force)``:

@@ -24,6 +24,7 @@ from ..devices.base import DeviceKind, device_kind
 from ..devices.force_box import ForceBox
 from .task import Dynamics, TargetFamily, procedure_schedule
 from .scene import Scene, build_scene, degrees_to_features
+from ..sections import SceneConfig
 
 OBS_MODES = ("vector", "dict", "vertices")
 # the shape-error floor: a target displacement below this share of the family centre's counts as it ...
@@ -59,7 +60,7 @@ def other_reward_terms(info: dict[str, Any]) -> Any:
 class World:
     """The composed environment rules for one validated scene config (see the module docstring)."""
 
-    def __init__(self, config: dict[str, Any], obs_mode: str = "vector") -> None:
+    def __init__(self, config: SceneConfig, obs_mode: str = "vector") -> None:
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode={obs_mode!r} is not one of {list(OBS_MODES)}")
         self.config = config
@@ -82,7 +83,7 @@ class World:
         self.horizon = task["horizon"]
         self.tolerance = task["tolerance"]
         self.terminate_on_success = task["terminate_on_success"]
-        self.weights = dict(config["reward"])
+        self.weights = config["reward"].copy()
         self.n_vertices = scene.mesh.n_vertices
         self.sqrt_variance = scene.sqrt_variance
         self.inv_sqrt = 1.0 / self.sqrt_variance

@@ -17,10 +17,11 @@ from ..devices.laryngoscope.physics import hand_action, hand_command
 from ..envs import HAPTIC_SCENES
 from ..envs.config import scene_config, scene_sections
 from ..envs.single import SoftSphereEnv
+from ..sections import SceneConfig
 from .logs import HAND_LOG, MAX_GAP_S, check_limits, check_table
 
 
-def haptic_config(scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+def haptic_config(scene: dict[str, Any] | None) -> SceneConfig:
     """SoftSphereHaptic-v0's config with ``scene``'s sections merged in; a scene of another device is refused
     (a hand moves the laryngoscope: hand logs, play and their scoring need it)."""
     config = scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene")
@@ -47,12 +48,12 @@ def relative_hand_pose(env: Any) -> np.ndarray:
     return np.array([x - gx, z - gy, pitch, y])
 
 
-def workspace(config: dict) -> tuple[np.ndarray, np.ndarray]:
+def workspace(config: SceneConfig) -> tuple[np.ndarray, np.ndarray]:
     """The hand's workspace relative to its start pose under ``config`` (low, high; x, z, pitch, y)."""
     return relative_box(LaryngoscopeParams.from_config(config))
 
 
-def hand_limits(config: dict) -> dict[str, tuple[float, float]]:
+def hand_limits(config: SceneConfig) -> dict[str, tuple[float, float]]:
     """The hand-pose columns' ranges relative to the start pose (the hand's workspace)."""
     low, high = workspace(config)
     return {c: (float(lo), float(hi)) for c, lo, hi in zip(HAND_LOG.columns[1:], low, high)}

@@ -37,6 +37,7 @@ from .._validation import check_choice, check_int, check_real, printable
 from ..envs.config import make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..envs.single import SoftSphereEnv
+from ..sections import SceneConfig
 from .hand import action_toward, hand_actions, haptic_config, haptic_env
 from .logs import (FORCE_LOG, HAND_LOG, MAX_DURATION_S, Schema, check_limits, check_table, read_log, read_scene,
                    save_log)
@@ -130,7 +131,7 @@ def check_trajectory(table: Any, source: str = "trajectory") -> np.ndarray:
     return check_table(table, FORCE_LOG, source)
 
 
-def check_ranges(table: np.ndarray, config: dict, source: str = "trajectory") -> None:
+def check_ranges(table: np.ndarray, config: SceneConfig, source: str = "trajectory") -> None:
     dev = config["device"]
     check_limits(table, FORCE_LOG, {
         "insertion_deg": dev["insertion_deg"], "lateral_deg": (-dev["lateral_deg"], dev["lateral_deg"]),
@@ -287,7 +288,7 @@ def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, sourc
     return hand_score(trainee, expert, config["reward"]["safe_force"], rest_view), trainee, expert
 
 
-def log_config(schema: Schema, scene: dict[str, Any] | None) -> dict[str, dict[str, Any]]:
+def log_config(schema: Schema, scene: dict[str, Any] | None) -> SceneConfig:
     """The config a log of ``schema`` replays on: its id's scene (SoftSphereHaptic-v0 for hand poses,
     SoftSphere-v0 for force commands) with ``scene``'s sections."""
     return haptic_config(scene) if schema is HAND_LOG else make_config(**scene_sections(scene))

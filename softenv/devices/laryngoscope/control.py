@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from . import ANGLE_SCALE, LATERAL_SCALE, POSITION_SCALE
+from ...sections import SceneConfig
 
 # the device slice of the observation (softenv.devices.laryngoscope.LARYNGOSCOPE_OBS)
 _BLADE_PITCH, _HAND_X, _HAND_PITCH, _HAND_Y, _NORMAL, _SIDEWAYS, _INCISOR = 2, 8, 10, 11, 12, 13, 14
@@ -57,7 +58,7 @@ class HandController:
         sweep_share: the lift's share of its target force at which the sweep starts.
     """
 
-    def __init__(self, config: dict, insert_depth: float = 0.01, k_p: float = 0.02, k_q: float = 0.05,
+    def __init__(self, config: SceneConfig, insert_depth: float = 0.01, k_p: float = 0.02, k_q: float = 0.05,
                  settle: float = 0.5, sweep_share: float = 0.9) -> None:
         dev = config["device"]
         self.radius = config["tissue"]["radius"]

@@ -29,12 +29,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from ..contact import TongueContact
 from ..presets import PRESETS, HapticPreset
+from ...sections import SceneConfig
 
 SPRING_LENGTH = 1.0           # m, rest length of the two coupling springs
 START_GAP = 0.005             # m between the blade's underside and the tongue at the start
@@ -77,8 +79,8 @@ class LaryngoscopeParams:
     max_sideways_force: float = 10.0
 
     @classmethod
-    def from_config(cls, config: dict[str, dict[str, Any]]) -> "LaryngoscopeParams":
-        dev = config["device"]
+    def from_config(cls, config: SceneConfig) -> "LaryngoscopeParams":
+        dev: Mapping[str, Any] = config["device"]
         keys = ("blade_mass", "handle_mass", "coupling_stiffness", "coupling_damping", "rotational_stiffness",
                 "rotational_damping", "max_hand_speed", "max_sweep_speed", "max_pitch_rate", "friction", "max_substep",
                 "max_normal_force", "max_sideways_force")

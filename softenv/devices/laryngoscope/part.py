@@ -17,6 +17,7 @@ from . import LARYNGOSCOPE_OBS
 from .params import LaryngoscopeParams
 from .single import Laryngoscope
 from .state import DeviceState
+from ...sections import RewardSection
 
 WALL_FACTOR = 1e3       # the saturated tongue's wall: this many times the coupling's stiffness
 INFO_KEYS = ("reward_incisor", "tongue_force_N", "incisor_force_N", "haptic_force_N", "blade_pose")
@@ -36,7 +37,7 @@ def glottic_view(scene: DeviceScene, b: np.ndarray) -> float:
     return clinical.glottic_view(clinical.sagittal_profile(vertices, scene.mesh.triangles), 1.0)
 
 
-def incisor_term(incisor_force: Any, weights: dict[str, float]) -> Any:
+def incisor_term(incisor_force: Any, weights: RewardSection) -> Any:
     """``reward_incisor``: ``-w F_incisor / F_safe`` (any force on the teeth is an error of technique)."""
     return -weights["incisor_weight"] * (incisor_force / weights["safe_force"])
 
@@ -48,7 +49,7 @@ def in_workspace(features: Any, touching: Any, low: Any, high: Any, rest: Any, o
     return ops.where(touching[:, None], ops.clip(features, low, high), rest)
 
 
-def batch_report(dev: Any, weights: dict[str, float], cast: Any = None) -> tuple[Any, dict[str, Any]]:
+def batch_report(dev: Any, weights: RewardSection, cast: Any = None) -> tuple[Any, dict[str, Any]]:
     """A batch's incisor reward term and its :data:`INFO_KEYS` values, each through ``cast`` (a dtype
     conversion of tensors; none for arrays)."""
     same = cast or (lambda x: x)
@@ -97,7 +98,7 @@ class LaryngoscopePart(PickledByState):
         self.laryngoscope = Laryngoscope(*laryngoscope_parts(scene, config))
         self._box = (scene.workspace.low, scene.workspace.high)
         self._rest = scene.rest_features.tolist()
-        self._weights = dict(config["reward"])
+        self._weights = config["reward"].copy()
         self.clinical = clinical.ClinicalRecorder(1, config["dynamics"]["dt"], config["task"]["horizon"])
 
     def reset(self) -> list[float]:

@@ -49,7 +49,7 @@ class LaryngoscopePartBatch(PickledByState):
         self._start_state = self.laryngoscopes.start_state(n)
         self._workspace = scene.workspace
         self._rest = scene.rest_features
-        self._weights = dict(config["reward"])
+        self._weights = config["reward"].copy()
         self.clinical = clinical.ClinicalRecorder(n, config["dynamics"]["dt"], config["task"]["horizon"])
 
     def _clinical_values(self) -> np.ndarray:

@@ -61,7 +61,7 @@ class LaryngoscopeTensorPart:
         self._low, self._high = t(scene.workspace.low), t(scene.workspace.high)
         self._rest = t(scene.rest_features)
         self._prev = torch.zeros(4, dtype=dtype, device=torch_device)
-        self._weights = dict(config["reward"])
+        self._weights = config["reward"].copy()
 
     def reset(self, mask: torch.Tensor) -> torch.Tensor:
         self.laryngoscopes.load_state(self._start_state, rows=mask)
