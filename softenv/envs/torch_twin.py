@@ -13,9 +13,9 @@ observation is float32 like the observation space.
 What it expresses: the tabulated response (``response.model = "exact"``, analytic or FE tissue, any
 law), quasi-static and viscoelastic dynamics, reach and procedure tasks, ``obs_mode`` vector and
 dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal device, and the
-laryngoscope on float64 tensors, which agrees with the numpy engines to rounding: on CUDA one Triton
-kernel a step by default, elsewhere the tensor engine; ``compile_options`` compiles the env's work around
-the device's step, and the tensor engine's substep, not with inductor on CUDA).
+laryngoscope on float64 tensors: the Warp kernel on CPU, bit for bit with the numpy twin's, and one
+Triton kernel a step on CUDA by default; ``compile_options`` compiles the env's work around the
+device's step).
 Not: regressor responses and vertex observations.
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
@@ -256,9 +256,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         for j in range(1, x.shape[1]):
             w = w * g[:, j, self._bits[:, j]]
         base = torch.sum(cell.to(torch.int64) * self._strides, dim=-1)
-        # corner by corner, not a gather of (N, 2^d, k) rows and a bmm: compiled, this is one elementwise
-        # kernel that reads the table's rows where they lie (inductor leaves bmm to cuBLAS on CUDA, after
-        # writing the rows out: 470 MB a step at 262,144 envs in float32); 1.5x faster compiled on CPU
+        # corner by corner, not a gather of rows and a bmm: compiled, one elementwise kernel reading the
+        # table's rows where they lie (docs/performance.md: measured choices)
         out = w[:, :1] * self._flat[base + self._offsets[0]]
         for c in range(1, len(self._offsets)):
             out = out + w[:, c:c + 1] * self._flat[base + self._offsets[c]]

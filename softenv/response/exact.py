@@ -75,11 +75,8 @@ class TableWork:
     """The scratch arrays of table lookups of up to ``n`` points (:meth:`TabulatedResponse.workspace`).
 
     A batched env keeps one and passes it every step, so its step allocates none of the lookup's large
-    temporaries (the result is a new array, as any numpy function's). Not for malloc's own cost: glibc
-    can serve blocks above its mmap threshold (128 KB until the process frees a larger one) with fresh
-    pages that fault in one by one, and whether a process is in that state depends on its allocation
-    history (a profiler puts it there). In that state a lookup of 1,024 points took 1.85 ms in place of
-    0.21 ms (1,050 page faults).
+    temporaries (the result is a new array, as any numpy function's): fresh large blocks can fault their
+    pages in one by one (docs/performance.md: measured choices).
     """
 
     weights: np.ndarray   # (m, 2^d) corner weights, m = min(n, CHUNK) points at a time
@@ -108,8 +105,7 @@ class TabulatedResponse(ResponseModel):
     """
 
     kind = "table"
-    # points per chunk of lookup: the gathered corners of a chunk (3.7 MB at k = 28) stay in cache, where
-    # 4,096 points' 15 MB did not: the twin at 16,384 envs ran 1.2x slower with those
+    # points per chunk of lookup: a chunk's gathered corners stay in cache (docs/performance.md)
     CHUNK = 1024
 
     def __init__(self, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray, values: np.ndarray, *,

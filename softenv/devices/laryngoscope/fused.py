@@ -10,11 +10,9 @@ the GPU's ``cos``, ``sin``, ``exp`` round as the host's the result is the Warp k
 ``tests/test_laryngoscope_fused.py`` holds it to the Warp kernel in Triton's interpreter
 (``TRITON_INTERPRET=1``, on CPU tensors) and on a GPU.
 
-The scene's constants (:func:`constants`) are compiled in as float64 literals, which take no registers:
-loaded from a tensor, all 77 were hoisted out of the substep loop into registers, and the kernel spilled
-more to local memory; as arguments Triton would read them as float32. So the kernel is compiled once for
-each set of constants (a scene's and its device's parameters). ``scripts/fused_kernel_profile.py`` shows
-what it compiles to on a GPU (registers, spills, each loop's instructions), found without one.
+The scene's constants (:func:`constants`) are compiled in as float64 literals, which take no registers
+(as arguments Triton would read them as float32), so the kernel is compiled once for each set of
+constants. ``scripts/fused_kernel_profile.py`` shows what it compiles to on a GPU, found without one.
 """
 
 from __future__ import annotations

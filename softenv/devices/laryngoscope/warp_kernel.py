@@ -715,7 +715,7 @@ def finish(d: Device, count: int, p: Params, blade: wp.array2d(dtype=f64), hand:
     incisor[i] = d.impulse / (f64(count) * p.h)
 
 
-# -O3 (Warp's CPU default is -O2): 3-5 % faster here; no fused multiply-add anywhere: the C library's roundings
+# -O3 (Warp's CPU default is -O2; docs/performance.md) and no fused multiply-add: the C library's roundings
 @wp.kernel(enable_backward=False, module="unique", module_options={"optimization_level": 3, "fuse_fp": False})
 def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
                    hand_v: wp.array2d(dtype=f64), contact: wp.array2d(dtype=f64), incisor: wp.array(dtype=f64),
