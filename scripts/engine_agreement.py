@@ -25,6 +25,7 @@ from scipy.stats import ks_2samp
 
 from softenv.baselines.benchmark import baseline_job
 from softenv._artifact import write_text
+from softenv.bench.timing import code_revision
 from softenv.envs import HAPTIC_SCENES
 
 
@@ -58,7 +59,8 @@ def main() -> None:
             print(f"{scene} {name}: done", flush=True)
     command = "python scripts/engine_agreement.py " + " ".join(sys.argv[1:])
     lines = [f"# The batched twin ({args.engine} engine) against single envs", "",
-             f"Made by `{command.strip()}` in {time.time() - start:.0f} s: {args.episodes} seeded test episodes of "
+             f"Made by `{command.strip()}` at commit `{code_revision()}` in {time.time() - start:.0f} s: {args.episodes} "
+             "seeded test episodes of "
              "each policy on each haptic scene, on the batched twin and on as many single (pymunk) envs. "
              "Per metric: episodes equal bit for bit, the largest difference, and the two-sample "
              "Kolmogorov-Smirnov p-value of the two distributions.", "",
@@ -74,7 +76,8 @@ def main() -> None:
               "`engine_agreement.json`. A KS p-value is left out where a metric has fewer than two finite values "
               "(steps to success where no episode succeeded)."]
     write_text(args.out / "engine_agreement.md", "\n".join(lines) + "\n")
-    write_text(args.out / "engine_agreement.json", json.dumps({"command": command, "engine": args.engine,
+    write_text(args.out / "engine_agreement.json", json.dumps({"command": command, "commit": code_revision(),
+                                                               "engine": args.engine,
                                                                "episodes": args.episodes, "table": table}, indent=1))
 
 
