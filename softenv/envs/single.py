@@ -208,7 +208,7 @@ class SoftSphereEnv(gym.Env):
         target = self._targets[ti]
         d = b - target
         sq = float(_add_reduce(d * d))                   # the batched twin's np.sum(..., axis=-1), row by row
-        change = float(action_change(np.array(a), np.array(self._prev)))
+        change = action_change(a, self._prev)
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, self._sq_ref[ti], normal, sideways, change,
                                                                        w.weights, ScalarOps)
         self._agent_cum += ratio

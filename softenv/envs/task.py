@@ -103,12 +103,12 @@ def procedure_features(target: Any, t: Any, start_insertion: float, ops: Ops) ->
 
 
 def action_change(a: Any, prev: Any) -> Any:
-    """``||a - prev||^2`` over the action's components (the last axis), summed in order: the same bits on
-    arrays and tensors, a row or a batch."""
-    c = a - prev
-    total = c[..., 0] * c[..., 0]
-    for i in range(1, c.shape[-1]):
-        total = total + c[..., i] * c[..., i]
+    """``||a - prev||^2`` from the actions' components, one item each (a row's floats, or a batch's columns:
+    ``a.T``), summed in order: the same bits on floats, arrays and tensors."""
+    terms = [(x - y) * (x - y) for x, y in zip(a, prev)]
+    total = terms[0]
+    for term in terms[1:]:
+        total = total + term
     return total
 
 

@@ -274,7 +274,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         b = w.dynamics.step(z, g)
         d = b - target
         sq = torch.sum(d * d, dim=-1)
-        change = action_change(a, self._prev)
+        change = action_change(a.T, self._prev.T)
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways,
                                                                        change, w.weights, TorchOps)
         agent_cum = self._agent_cum + ratio.to(torch.float64)

@@ -164,7 +164,7 @@ class SoftSphereVectorEnv(VectorEnv):
         target, sq_ref = self._targets(ep.target_b), self._targets(ep.sq_ref)
         d = np.subtract(b, target, out=self._diff)
         sq = np.sum(np.multiply(d, d, out=d), axis=-1)
-        change = action_change(a, self._prev)
+        change = action_change(a.T, self._prev.T)
         reward, shape, force_term, smooth, ratio, force = reward_terms(sq, sq_ref, normal, sideways, change,
                                                                        w.weights, ArrayOps)
         agent_cum = self._agent_cum + ratio
