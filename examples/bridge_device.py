@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from softenv.training.bridge import BridgeClient
+from softenv.haptics.bridge import BridgeClient
 from softenv.training.logs import HAND_LOG, read_log
 
 

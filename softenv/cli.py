@@ -35,7 +35,7 @@ from ._artifact import check_out_dir
 from ._progress import Progress
 from ._validation import check_int, check_real, printable
 from .training import play
-from .training.bridge import LOOPBACK
+from .haptics.bridge import LOOPBACK
 from .training.inputs import CONTROLS
 from .training.logs import EXAMPLES, MAX_DURATION_S, example_log
 from .training.scoring import score_file
@@ -373,7 +373,7 @@ def cmd_play(args: argparse.Namespace) -> None:
     if args.bridge is not None:
         bridge = play.open_bridge(*args.bridge)
         host, port = bridge.address
-        print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.training.bridge)")
+        print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.haptics.bridge)")
     elif args.device != "keys":
         device = play.open_haptic_device(args.device)
     try:
@@ -518,7 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "extra and OpenHaptics) or a Force Dimension arm (the forcedimension extra and its SDK), "
                         "both untested without the hardware")
     p.add_argument("--bridge", type=_bridge_address, metavar="[HOST:]PORT",
-                   help="a haptic device drives the hand over UDP (softenv.training.bridge: poses in, force out); "
+                   help="a haptic device drives the hand over UDP (softenv.haptics.bridge: poses in, force out); "
                         "listens on 127.0.0.1:PORT unless HOST is given (another address lets other machines in)")
     store_args(p)
 

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from softenv.training import play
-from softenv.training.bridge import (COUNTS, FORCE, POSE, BridgeClient, BridgeServer, encode_force, encode_pose,
+from softenv.haptics.bridge import (COUNTS, FORCE, POSE, BridgeClient, BridgeServer, encode_force, encode_pose,
                                      decode, FORCE_MAGIC)
 from softenv.training.logs import example_log, read_log
 from softenv.training.scoring import score_file

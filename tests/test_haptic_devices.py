@@ -11,7 +11,8 @@ import pytest
 
 from softenv.cli import main
 from softenv.training import play
-from softenv.training.haptic_devices import ForceDimensionDevice, ServoDevice, TouchDevice
+from softenv.training.inputs import ArmInput
+from softenv.haptics.arms import ForceDimensionDevice, ServoDevice, TouchDevice
 from softenv.training.hand import haptic_config, workspace
 from softenv.training.logs import read_log
 
@@ -73,7 +74,7 @@ def test_a_touch_drives_a_session_and_feels_its_force(tmp_path, monkeypatch):
     play.headless()
     device = TouchDevice(WORKSPACE, max_force_N=2.0)
     try:
-        session = play.run(seconds=1.0, out_dir=tmp_path, realtime=True, screens=False, device=device,
+        session = play.run(seconds=1.0, out_dir=tmp_path, realtime=True, screens=False, device=ArmInput(device),
                            echo=lambda s: None)
     finally:
         device.close()
@@ -116,7 +117,7 @@ def test_force_dimension_axes_and_servo_loop(monkeypatch):
         position[:] = [-0.02, 0.01, -0.015]                             # 2 cm away from the user, 1 cm right, 1.5 cm down
         time.sleep(0.05)
         assert np.allclose(device.hand_pose(), [-0.02, -0.015, 0.0, 0.01])
-        device.feel(1, 0.02, np.array([1.0, 2.0, 3.0]))
+        device.feel(np.array([1.0, 2.0, 3.0]))
         time.sleep(0.05)
         assert np.allclose(calls["forces"][-1], [0.5, 1.0, 1.5])         # world (x, y, z) = the SDK's axes, scaled
     finally:

@@ -14,7 +14,7 @@ from softenv.devices.laryngoscope.params import ACCURACY, LaryngoscopeParams, su
 from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.devices.laryngoscope.single import Laryngoscope
 from softenv.devices.laryngoscope.space import COLLISION_SLOP, virtual_coupling
-from softenv.devices.presets import PRESETS, render_force
+from softenv.devices.haptic_presets import PRESETS, render_force
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
 from softenv.envs.world import World

@@ -1,5 +1,5 @@
 """Benchmark of the haptic-device bridge on loopback: round-trip latency of a pose and its force, and
-what was lost or garbled on the way (:mod:`softenv.training.bridge`)."""
+what was lost or garbled on the way (:mod:`softenv.haptics.bridge`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from ..training.bridge import BridgeClient, BridgeServer
+from ..haptics.bridge import BridgeClient, BridgeServer
 from .timing import Row, Timing
 
 LIMITS = ((-1.0, -1.0, -1.0, -1.0), (1.0, 1.0, 1.0, 1.0))

@@ -32,7 +32,7 @@ def press_actions(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarra
 
 
 def bench_haptic(quick: bool, reference: Timing) -> list[Row]:
-    from ..haptics import HapticLoop          # imports pymunk: only when this section runs
+    from ..haptics.loop import HapticLoop     # imports pymunk: only when this section runs
 
     rows: list[Row] = []
     loop = HapticLoop()

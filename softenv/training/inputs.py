@@ -9,8 +9,9 @@ session steers toward it with :func:`softenv.training.hand.action_toward`, so a 
 replays exactly as it was played.
 
 Backends: :class:`PygameInput` (keyboard, mouse, gamepad; the default), :class:`BridgeInput` (a device
-process speaking :mod:`softenv.training.bridge` over UDP), and the vendor SDKs in
-:mod:`softenv.training.haptic_devices`.
+process speaking :mod:`softenv.haptics.bridge` over UDP), and :class:`ArmInput` (a vendor arm of
+:mod:`softenv.haptics.arms`). The hardware and the wire live in :mod:`softenv.haptics`; this module
+only turns them into a session's actions.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from .bridge import BridgeServer
+from ..haptics.arms import ServoDevice
+from ..haptics.bridge import BridgeServer
 from .hand import action_toward, pose_after, relative_hand_pose
 
 # every control of a session, as the screen and ``softenv play --help`` list them
@@ -137,7 +139,7 @@ class PygameInput:
 
 
 class BridgeInput:
-    """A device process on the network bridge (:mod:`softenv.training.bridge`): the hand moves toward
+    """A device process on the network bridge (:mod:`softenv.haptics.bridge`): the hand moves toward
     the newest pose it sent (held where it was until one comes) and the rendered force goes back with
     the sequence number of that pose. ``wait_s``: how long each period waits for a pose (0 in real time;
     a second for a device in lockstep with a session that runs as fast as it can)."""
@@ -168,3 +170,27 @@ class BridgeInput:
 
     def describe(self) -> str:
         return "a device over the bridge, messages " + ", ".join(f"{k} {v}" for k, v in self.server.counts.items())
+
+
+class ArmInput:
+    """A vendor haptic arm (:mod:`softenv.haptics.arms`): the hand moves toward the stylus's newest pose and
+    the rendered force goes back through the arm's servo loop."""
+
+    def __init__(self, arm: ServoDevice) -> None:
+        self.arm = arm
+        self.name = arm.name
+
+    def handle(self, event: Any) -> None:
+        """The arm has its own channel, not the window's events."""
+
+    def action(self, env: Any, dt: float) -> np.ndarray:
+        return action_toward(env, self.arm.hand_pose())
+
+    def feel(self, step: int, time_s: float, force_N: np.ndarray) -> None:
+        self.arm.feel(force_N)
+
+    def close(self) -> None:
+        self.arm.close()
+
+    def describe(self) -> str:
+        return self.arm.describe()

@@ -28,10 +28,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .bridge import LOOPBACK, BridgeServer
+from ..haptics.arms import BACKENDS
+from ..haptics.bridge import LOOPBACK, BridgeServer
 from .hand import haptic_config, haptic_env, relative_hand_pose, workspace
-from .haptic_devices import BACKENDS, ServoDevice
-from .inputs import BridgeInput, InputDevice, PygameInput
+from .inputs import ArmInput, BridgeInput, InputDevice, PygameInput
 from .logs import HAND_LOG, save_log
 from .play_view import SIZE, PlayView
 from .scoring import INCISOR_LIMIT_N, score_file
@@ -194,12 +194,12 @@ def open_bridge(host: str = LOOPBACK, port: int = 0, scene: dict[str, Any] | Non
         raise ValueError(f"--bridge {host}:{port} cannot be listened on: {exc.strerror or exc}") from None
 
 
-def open_haptic_device(kind: str, scene: dict[str, Any] | None = None) -> ServoDevice:
-    """A vendor haptic arm (``touch`` or ``forcedimension``: :mod:`softenv.training.haptic_devices`) mapped
+def open_haptic_device(kind: str, scene: dict[str, Any] | None = None) -> ArmInput:
+    """A vendor haptic arm (``touch`` or ``forcedimension``: :mod:`softenv.haptics.arms`) mapped
     into the hand's workspace on ``scene``; refused in one line naming what to install if it cannot open."""
     if kind not in BACKENDS:
         raise ValueError(f"--device {kind!r} is not one of {['keys', *BACKENDS]}")
-    return BACKENDS[kind](workspace(haptic_config(scene)))
+    return ArmInput(BACKENDS[kind](workspace(haptic_config(scene))))
 
 
 def display_available() -> bool:

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..contact import TongueContact
-from ..presets import PRESETS, HapticPreset
+from ..haptic_presets import PRESETS, HapticPreset
 from ...sections import SceneConfig
 
 SPRING_LENGTH = 1.0           # m, rest length of the two coupling springs

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..._ops import ArrayOps, PhysicsOps
 from ..contact import TongueContact
-from ..presets import render_components
+from ..haptic_presets import render_components
 from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, SPEED_SCALE, SPIN_SCALE
 from .params import INCISOR_RADIUS, SHAPE_FRICTION, SPRING_LENGTH, LaryngoscopeParams
 from .physics import (contact_features, coupling_force, grip_offset, hand_command, nearest_point, squash,
@@ -214,7 +214,7 @@ class LaryngoscopeBase:
 
     def haptic_force(self) -> Any:
         """Force ``(n, 3)`` (world x, y, z; N) that the preset device renders to the hand: the coupling's
-        pull on the hand, scaled and saturated (:func:`softenv.devices.presets.render_force`)."""
+        pull on the hand, scaled and saturated (:func:`softenv.devices.haptic_presets.render_force`)."""
         return self._rows(*self._rendered())
 
     def _rendered(self) -> tuple[Any, Any, Any]:

@@ -1,13 +1,12 @@
-"""Vendor haptic arms as input devices for ``softenv play`` (:class:`softenv.training.inputs.InputDevice`):
-a 3D Systems Touch through OpenHaptics (``pyOpenHaptics``, the ``touch`` extra) and a Force Dimension
+"""Vendor haptic arms: a 3D Systems Touch through OpenHaptics (``pyOpenHaptics``, the ``touch`` extra) and a Force Dimension
 omega, sigma or delta through its SDK (``forcedimension-core``, the ``forcedimension`` extra).
 
 Both run a 1 kHz servo loop beside the session, as CHAI3D's and SOFA's device plugins do: OpenHaptics
 calls our servo callback from its own scheduler thread; for Force Dimension a thread of ours reads the
 position and writes the force every millisecond. Each servo tick stores the stylus position and renders
-the newest force; the session (50 Hz) reads the newest position, maps it into the hand's workspace and
-steers the hand there (:func:`softenv.training.hand.action_toward`), then hands back the force the
-laryngoscope renders. What runs without hardware is tested with a simulated SDK (``tests/test_play.py``);
+the newest force; a ``softenv play`` session (50 Hz, through :class:`softenv.training.inputs.ArmInput`)
+reads the newest position mapped into the hand's workspace, steers the hand there, then hands back the
+force the laryngoscope renders. What runs without hardware is tested with a simulated SDK (``tests/test_haptic_devices.py``);
 the vendor calls themselves are untested here, for want of the devices.
 
 Axes: the servo loop works in OpenHaptics' frame (x right, y up, z toward the user; Force Dimension's x
@@ -26,8 +25,6 @@ import time
 from typing import Any
 
 import numpy as np
-
-from .hand import action_toward
 
 SERVO_HZ = 1000.0
 
@@ -69,13 +66,8 @@ class ServoDevice:
         x, y, z = moved * self.scale
         return np.clip(np.array([z, y, 0.0, x]), self.low, self.high)
 
-    def handle(self, event: Any) -> None:
-        """The arm has its own channel, not the window's events."""
-
-    def action(self, env: Any, dt: float) -> np.ndarray:
-        return action_toward(env, self.hand_pose())
-
-    def feel(self, step: int, time_s: float, force_N: np.ndarray) -> None:
+    def feel(self, force_N: np.ndarray) -> None:
+        """Render ``force_N`` (N, world x, y, z) from the next servo tick on, scaled and saturated."""
         fx, fy, fz = np.asarray(force_N, dtype=np.float64) * self.force_scale
         force = np.array([fy, fz, fx])                                    # world (x, y, z) -> device axes
         size = float(np.linalg.norm(force))

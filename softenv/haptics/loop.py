@@ -5,9 +5,9 @@ millisecond with the hand's pose and renders the force it returns; at a graphics
 :meth:`HapticLoop.surface` gives the tongue's surface ``X = m + Phi b`` to draw. The physics is the
 single env's (:class:`softenv.devices.laryngoscope.single.Laryngoscope`, same scene config)::
 
-    import softenv.haptics
+    from softenv.haptics import HapticLoop
 
-    loop = softenv.haptics.HapticLoop()                      # SoftSphereHaptic-v0's scene, 1 kHz
+    loop = HapticLoop()                      # SoftSphereHaptic-v0's scene, 1 kHz
     pose = loop.hand_pose                                     # x, z (m), pitch (rad), y (m)
     for tick in range(2000):                                  # 2 s of a hand pressing down at 2 cm/s
         force = loop.tick(pose - [0.0, 0.02 * tick / 1000, 0.0, 0.0])
@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from ._validation import check_array, check_real, real_array
-from .devices.laryngoscope.part import laryngoscope_parts
-from .devices.laryngoscope.single import Laryngoscope
-from .envs import HAPTIC_SCENES
-from .envs.config import scene_config
-from .envs.task import Dynamics
-from .envs.world import World
+from .._validation import check_array, check_real, real_array
+from ..devices.laryngoscope.part import laryngoscope_parts
+from ..devices.laryngoscope.single import Laryngoscope
+from ..envs import HAPTIC_SCENES
+from ..envs.config import scene_config
+from ..envs.task import Dynamics
+from ..envs.world import World
 
 
 class HapticLoop:
