@@ -43,7 +43,7 @@ from softenv.bench.timing import code_revision
 from softenv.envs.config import make_config
 from softenv.envs.world import World
 from softenv.training import profiles
-from softenv.training.hand import action_toward, relative_hand_pose
+from softenv.training.hand import action_toward, haptic_config, relative_hand_pose
 from softenv.training.scoring import replay_hand
 from softenv.training.trainee import degrade, expert_hand_log
 
@@ -112,7 +112,7 @@ class TraineeDemonstrator:
 
     def __init__(self, scene: str, amounts: dict[str, float], name: str) -> None:
         self.scene, self.amounts, self.name = scene, amounts, name
-        self.sections = _sections(scene)
+        self.config = haptic_config(_sections(scene))          # made once for every episode's degraded path
         self._poses, self._t = np.zeros((1, 4)), 0
 
     def begin(self, seed: int) -> None:
@@ -127,7 +127,7 @@ class TraineeDemonstrator:
             done = terminated or truncated
         dt = env.world.config["dynamics"]["dt"]
         log = np.column_stack([np.arange(len(poses)) * dt, np.array(poses)])
-        self._poses = degrade(log, self.sections, seed=seed, **self.amounts)[:, 1:]
+        self._poses = degrade(log, self.config, seed=seed, **self.amounts)[:, 1:]
         self._t = 0
 
     def act(self, env: Any, obs: np.ndarray) -> np.ndarray:
@@ -168,13 +168,13 @@ def make_env(scene: str, split: str = TRAIN_SPLIT) -> gym.Env:
 def trainee_amounts(scene: str) -> dict[str, dict[str, float]]:
     """The published profiles' error amounts (:mod:`softenv.training.profiles`, found at the family's
     centre on the scene's hand scene), by profile name."""
-    sections = _sections(scene)
-    log = expert_hand_log(sections)
-    expert = replay_hand(log, sections)
+    config = haptic_config(_sections(scene))
+    log = expert_hand_log(config)
+    expert = replay_hand(log, config)
     out: dict[str, dict[str, float]] = {"expert": {}}
     for name, study, time_ratio, force_ratio, path_ratio in profiles.PROFILES:
         if name in ("intermediate", "novice"):
-            out[name] = profiles.build(name, study, (time_ratio, force_ratio, path_ratio), log, expert, sections).amounts
+            out[name] = profiles.build(name, study, (time_ratio, force_ratio, path_ratio), log, expert, config).amounts
     return out
 
 

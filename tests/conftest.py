@@ -69,3 +69,20 @@ def heavy_modules_after(cache_dir):
         out = subprocess.run([sys.executable, "-c", code + probe], capture_output=True, text=True, check=True)
         return eval(out.stdout.strip().splitlines()[-1])
     return run
+
+
+@pytest.fixture
+def scene_makes(monkeypatch):
+    """Every scene config made from here on (``make_config``, from the config module or the scoring's import)."""
+    import softenv.envs.config as config_module
+    from softenv.training import scoring
+
+    made, real = [], config_module.make_config
+
+    def counting(*args, **kwargs):
+        made.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(config_module, "make_config", counting)
+    monkeypatch.setattr(scoring, "make_config", counting)
+    return made

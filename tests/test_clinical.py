@@ -16,7 +16,7 @@ import softenv  # noqa: F401  (registers the ids)
 from softenv.devices.laryngoscope import clinical
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, SHAPE_FRICTION
 from softenv.geometry import make_mesh
-from softenv.training.hand import action_toward, haptic_env
+from softenv.training.hand import action_toward, haptic_config, reach_env
 
 
 def min_jerk_speed(n: int) -> np.ndarray:
@@ -211,7 +211,7 @@ def test_the_hands_moment_about_the_incisors_balances_the_tongues_when_levering(
     incisors (a lever on the teeth) comes to rest with its moment about the incisal edge equal and
     opposite to the tongue's force P n at the contact point, up to the incisors' friction on their
     round bar (at most mu N r, mu the product of the two shapes' frictions as pymunk takes it); and the episode's lever share is then near 1."""
-    env = haptic_env(None, 150)
+    env = reach_env(haptic_config(None), 150)
     env.reset(seed=0)
     laryngoscope = env.device.laryngoscope
     for k in range(150):                                     # raise the hand 5 mm, turn it 0.4 rad, hold

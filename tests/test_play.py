@@ -10,6 +10,7 @@ import pytest
 from softenv.training import play
 from softenv.training.inputs import CONTROLS, DEAD_ZONE, FINE, RAMP_FLOOR, RAMP_S, PygameInput
 from softenv.training.logs import read_log
+from softenv.training.scoring import score_file
 from softenv.training.play_view import DANGER, SOLID, TARGET
 
 DT = 0.02
@@ -53,6 +54,19 @@ def test_a_scripted_session_writes_a_log_that_scores_like_the_session(tmp_path):
     for key in ("peak_tongue_force_N", "tongue_force_time_Ns", "hand_path_m", "glottic_view_pct"):
         assert metrics["clinical"][key] == pytest.approx(session.live_clinical[key], rel=1e-4, abs=1e-9), key
     assert 0.0 < session.report["score"] < 100.0
+
+
+def test_a_session_makes_its_scene_once_and_reports_what_scoring_its_log_reports(tmp_path, scene_makes):
+    """The session's scene is made once, at its start, and the env and the scoring take it; the report equals
+    ``softenv score`` of the written log, which makes the scene again from the file."""
+    play.headless()
+    made = scene_makes
+    session = play.run(seconds=0.6, out_dir=tmp_path, realtime=False, script=_player, echo=lambda s: None,
+                       screens=False, scene={"reward": {"safe_force": 7.0}})
+    assert len(made) == 2                                   # scene_config: SoftSphereHaptic-v0's scene, then the sections
+    again = score_file(session.log_path)
+    assert again["score"] == session.report["score"] and again["scene"] == session.report["scene"]
+    assert again["safe_force_N"] == 7.0 and again["metrics"] == session.report["metrics"]
 
 
 def test_escape_ends_the_session_early_and_an_empty_session_is_an_error(tmp_path):

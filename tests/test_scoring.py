@@ -11,6 +11,7 @@ import pytest
 
 from softenv.cli import main
 from softenv.envs import make_config
+from softenv.training.hand import haptic_config
 from softenv.training.logs import EXAMPLES_DIR, FORCE_LOG, HAND_LOG, read_log, read_scene, save_log
 from softenv.training.scoring import (ADVICE, COLUMNS, expert_trajectory, improvements, load_trajectory,
                                       points_to_gain, replay, replay_hand, save_trajectory, score_file, score_hand_log)
@@ -244,6 +245,20 @@ def test_bad_device_logs_get_one_line_exit_2_and_nothing_written(tmp_path, capsy
 STIFF = {"tissue": {"law": "stiffening"}}
 
 
+def test_scoring_a_log_makes_its_scene_once(expert_log, tmp_path, scene_makes):
+    """The scene is made where the log is read (the id's scene, then the recorded sections over it) and the
+    made config is passed to the replays, the expert's log and the ranges: it was made 24 times for a hand log."""
+    save_log(expert_log, tmp_path / "hand.csv", HAND_LOG, scene=STIFF)
+    save_trajectory(expert_trajectory(duration_s=1.0), tmp_path / "force.csv")
+    made = scene_makes
+    made.clear()                                            # the logs' own making above
+    score_file(tmp_path / "hand.csv")
+    assert len(made) == 2                                   # scene_config: SoftSphereHaptic-v0's scene, then STIFF
+    made.clear()
+    score_file(tmp_path / "force.csv")
+    assert len(made) == 1                                   # SoftSphere-v0's scene with the log's (empty) sections
+
+
 def test_a_log_records_its_scene_and_is_replayed_on_it(expert_log, tmp_path):
     """A log scores the same whoever scores it: on the scene it records, not on whatever the reader names."""
     path = tmp_path / "stiff.csv"
@@ -252,7 +267,7 @@ def test_a_log_records_its_scene_and_is_replayed_on_it(expert_log, tmp_path):
     report = score_file(path)
     assert report["scene"] == STIFF and report["scene_from"] == "the log"
     table = read_log(path)[1]                                                # as written: 9 digits
-    assert report["score"] == score_hand_log(table, STIFF)[0]["score"] != score_hand_log(table)[0]["score"]
+    assert report["score"] == score_hand_log(table, haptic_config(STIFF))[0]["score"] != score_hand_log(table)[0]["score"]
     same = {"tissue": {"law": "stiffening", "E": make_config()["tissue"]["E"]}}     # the same config, spelt out
     assert score_file(path, scene=same)["score"] == report["score"]
     with pytest.raises(ValueError, match=r"was recorded on scene \{'tissue': \{'law': 'stiffening'\}\}; scene=\{\} asks "
@@ -266,7 +281,9 @@ def test_a_scene_of_another_device_is_refused_by_device_kind(expert_log, tmp_pat
     ideal = {"device": {"kind": "ideal"}}
     why = "device.kind='ideal': a hand-pose log moves the laryngoscope, so replaying and scoring it needs device.kind='laryngoscope'"
     with pytest.raises(ValueError, match=re.escape(why)):
-        score_hand_log(expert_log, scene=ideal)
+        score_hand_log(expert_log, make_config(**ideal))        # a made config of another device
+    with pytest.raises(ValueError, match=re.escape(why)):
+        haptic_config(ideal)
     path = tmp_path / "ideal.csv"
     save_log(expert_log, path, HAND_LOG, scene=ideal)
     with pytest.raises(ValueError, match="the scene it records is not valid here: " + re.escape(why)):
@@ -290,16 +307,16 @@ def test_old_logs_without_a_scene_replay_on_the_named_scene(expert_log, tmp_path
     path.write_text("".join(line for line in path.read_text().splitlines(keepends=True) if not line.startswith("#")))
     assert read_scene(path) is None
     assert score_file(path)["scene_from"] == "the id's own (the log records none)"
-    assert score_file(path, scene=STIFF)["score"] == score_hand_log(read_log(path)[1], STIFF)[0]["score"]
+    assert score_file(path, scene=STIFF)["score"] == score_hand_log(read_log(path)[1], haptic_config(STIFF))[0]["score"]
     np.savez(tmp_path / "old.npz", format_version=1, **{c: expert_log[:, j] for j, c in enumerate(HAND_LOG.columns)})
-    assert score_file(tmp_path / "old.npz", scene=STIFF)["score"] == score_hand_log(expert_log, STIFF)[0]["score"]
+    assert score_file(tmp_path / "old.npz", scene=STIFF)["score"] == score_hand_log(expert_log, haptic_config(STIFF))[0]["score"]
 
 
 def test_npz_logs_record_their_scene_in_a_string_member(expert_log, tmp_path):
     columns = {c: expert_log[:, j] for j, c in enumerate(HAND_LOG.columns)}
     np.savez(tmp_path / "new.npz", format_version=2, scene=np.array(json.dumps(STIFF)), **columns)
     assert read_scene(tmp_path / "new.npz") == STIFF
-    assert score_file(tmp_path / "new.npz")["score"] == score_hand_log(expert_log, STIFF)[0]["score"]
+    assert score_file(tmp_path / "new.npz")["score"] == score_hand_log(expert_log, haptic_config(STIFF))[0]["score"]
     bad = {"no scene": (dict(format_version=2), "format_version=2 needs a scene member"),
            "scene in v1": (dict(format_version=1, scene=np.array("{}")), "format_version=1 has no scene member"),
            "not JSON": (dict(format_version=2, scene=np.array("{tissue")), "member 'scene' is not JSON"),

@@ -108,9 +108,9 @@ def test_pickled_envs_keep_their_time_limit(tried):
 def _recorded(actions: np.ndarray, offset: float = 0.0) -> tuple[np.ndarray, np.ndarray, bool]:
     """A hand log recorded from an env run (poses at every control period, the clock starting at
     ``offset``), its shape errors, and whether the hand ever stood on a wall of its workspace."""
-    from softenv.training.hand import haptic_env, relative_box, relative_hand_pose
+    from softenv.training.hand import haptic_config, reach_env, relative_box, relative_hand_pose
 
-    env = haptic_env(None, len(actions))
+    env = reach_env(haptic_config(None), len(actions))
     world = env.world
     env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
     poses, errors = [relative_hand_pose(env)], []
@@ -339,7 +339,7 @@ def test_a_benchmark_report_is_written_all_or_nothing(tmp_path, monkeypatch, tri
 
 def _training_calls():
     from softenv.haptics import HapticLoop
-    from softenv.training import scoring, trainee
+    from softenv.training import hand, scoring, trainee
 
     log = trainee.expert_hand_log(duration_s=1.0)
     nan, back = log.copy(), log.copy()
@@ -348,8 +348,10 @@ def _training_calls():
     loop = HapticLoop()
     loop.reset()
     return {
-        "score_hand_log(scene=5)": (lambda: scoring.score_hand_log(log, scene=5), "scene=5 must be a dict"),
-        "score_hand_log(scene={'tisue': ...})": (lambda: scoring.score_hand_log(log, scene={"tisue": {}}), "'tisue'"),
+        "score_hand_log(config=5)": (lambda: scoring.score_hand_log(log, 5), "config must be a scene config made by make_config()"),
+        "score_hand_log(sections as config)": (lambda: scoring.score_hand_log(log, {"tissue": {}}),
+                                               "got ['tissue']; make one from sections with haptic_config(sections)"),
+        "haptic_config(scene={'tisue': ...})": (lambda: hand.haptic_config({"tisue": {}}), "'tisue'"),
         "degrade(NaN)": (lambda: trainee.degrade(nan, tremor=0.1), "row 4, column 'hand_x_m' = nan is not finite"),
         "degrade(times back)": (lambda: trainee.degrade(back), "row 6, column 'time_s'"),
         "degrade(seed=1.5)": (lambda: trainee.degrade(log, seed=1.5), "seed must be an integer"),

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..training import play
-from ..training.hand import haptic_env
+from ..training.hand import haptic_config, reach_env
 from ..training.play_view import SIZE, PlayView
 from ..training.scoring import INCISOR_LIMIT_N
 from .timing import Row, Timing
@@ -21,7 +21,7 @@ def bench_play(quick: bool, reference: Timing) -> list[Row]:
 
     frames = 150 if quick else 1_000
     play.headless()
-    env = haptic_env(None, frames)
+    env = reach_env(haptic_config(None), frames)
     world = env.world
     env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
     pygame.display.init()

@@ -267,6 +267,19 @@ def scene_config(base_scene: dict[str, Any] | None, sections: dict[str, Any],
     return make_config(make_config(**(base_scene or {})), **sections)
 
 
+def check_config(config: Any, name: str = "config", maker: str = "make_config(**sections)") -> SceneConfig:
+    """``config`` if it is a made config (every section with every key, as :func:`make_config` returns);
+    else a ``ValueError`` naming what is missing and ``maker``, the call that makes one. Its values are
+    checked where an env is made from it."""
+    made = isinstance(config, Mapping) and set(config) == set(SCHEMA) and all(
+        isinstance(config[s], Mapping) and set(config[s]) == set(fields) for s, fields in SCHEMA.items())
+    if not made:
+        given = sorted(config) if isinstance(config, Mapping) else type(config).__name__
+        raise ValueError(f"{name} must be a scene config made by make_config() (every section: {list(SCHEMA)}, "
+                         f"each with every key), got {given!r}; make one from sections with {maker}")
+    return cast(SceneConfig, config)
+
+
 def validate_config(config: Mapping[str, Any]) -> SceneConfig:
     """Check every value and the constraints between them; returns the normalised config."""
     out: dict[str, dict[str, Any]] = {}

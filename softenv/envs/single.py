@@ -11,7 +11,8 @@ import numpy as np
 
 from .._ops import ScalarOps
 from .checks import check_action_one, check_seed, target_option
-from .config import scene_config
+from ..sections import SceneConfig
+from .config import check_config, scene_config, validate_config
 from .rendering import RENDER_MODES, SceneRenderer, check_render_mode
 from .task import action_change, normalized_score, reward_terms
 from .world import Episodes, World
@@ -160,8 +161,11 @@ class SoftSphereEnv(gym.Env):
 
     def __init__(self, render_mode: str | None = None, obs_mode: str = "vector",
                  base_scene: dict[str, Any] | None = None, **scene: Any) -> None:
+        self._build(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), render_mode, obs_mode)
+
+    def _build(self, config: SceneConfig, render_mode: str | None, obs_mode: str) -> None:
         check_render_mode(render_mode)
-        self.world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
+        self.world = World(config, obs_mode)
         self.metadata = {**self.metadata, "render_fps": self.world.config["render"]["fps"]}
         self.render_mode = render_mode
         self.action_space = self.world.action_space
@@ -173,6 +177,15 @@ class SoftSphereEnv(gym.Env):
             self.compute_reward = self.world.compute_reward
         self._renderer: SceneRenderer | None = None
         self._episode: Episodes | None = None
+
+    @classmethod
+    def from_config(cls, config: SceneConfig, render_mode: str | None = None,
+                    obs_mode: str = "vector") -> SoftSphereEnv:
+        """The env of a config already made (:func:`softenv.make_config`; checked here, not rebuilt): for
+        callers that made a scene once and derive envs from it (the trainee wing's replays)."""
+        env = cls.__new__(cls)
+        env._build(validate_config(check_config(config)), render_mode, obs_mode)
+        return env
 
     # -- gymnasium API --------------------------------------------------------------------------
 

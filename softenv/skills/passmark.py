@@ -28,6 +28,7 @@ import numpy as np
 
 from .._validation import check_int
 from ..training import profiles, scoring
+from ..training.hand import haptic_config
 from ..training.scoring import replay_hand, score_hand_log
 from ..training.trainee import LIMITS, degrade, expert_hand_log
 
@@ -125,9 +126,9 @@ def _profile_amounts(name: str, scene_json: str) -> tuple[tuple[str, float], ...
     _, study, *ratios = next(row for row in profiles.PROFILES if row[0] == name)
     if all(r == 1.0 for r in ratios):
         return ()
-    scene = json.loads(scene_json) or None
-    log = expert_hand_log(scene)
-    built = profiles.build(name, study, (ratios[0], ratios[1], ratios[2]), log, replay_hand(log, scene), scene)
+    config = haptic_config(json.loads(scene_json))
+    log = expert_hand_log(config)
+    built = profiles.build(name, study, (ratios[0], ratios[1], ratios[2]), log, replay_hand(log, config), config)
     return tuple(built.amounts.items())
 
 
@@ -136,16 +137,17 @@ def contrasting_groups(scene_key: str, scene: dict[str, Any] | None = None, per_
     """The pass mark on a hand-pose scene (``scene``'s sections; ``scene_key`` how the store names it)
     from ``per_group`` synthetic members of the expert and of the novice profile."""
     check_int(per_group, "per_group", 2, 1000)
-    log = expert_hand_log(scene)
-    expert = replay_hand(log, scene, "the expert's log")
+    config = haptic_config(scene)                    # the scene, made once for every member's replay
+    log = expert_hand_log(config)
+    expert = replay_hand(log, config, "the expert's log")
     groups: dict[str, list[float]] = {}
     total, done = len(GROUPS) * per_group, 0
     for g, group in enumerate(GROUPS):
         profile = profile_amounts(group, scene)
         groups[group] = []
         for amounts, tremor_seed in group_amounts(profile, per_group, seed + g):
-            member = degrade(log, scene, seed=tremor_seed, **amounts)
-            groups[group].append(score_hand_log(member, scene, f"a {group}-profile member", expert)[0]["score"])
+            member = degrade(log, config, seed=tremor_seed, **amounts)
+            groups[group].append(score_hand_log(member, config, f"a {group}-profile member", expert)[0]["score"])
             done += 1
             if progress is not None:
                 progress(done, total)

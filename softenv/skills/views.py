@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from ..training.logs import HAND_LOG, read_log
-from ..training.scoring import log_config, replay, replay_hand, scene_of
+from ..training.scoring import replay, replay_hand, scene_of
 from .passmark import PassMark
 from .store import StoredSession, log_file
 
@@ -119,12 +119,12 @@ def replay_gif(log_name: str, data: bytes, scene: dict[str, Any] | None) -> byte
     """The replay of a kept log on its scene, as an animated GIF of :data:`FRAMES` frames."""
     with log_file(data, log_name) as path:
         schema, table = read_log(path)
-        sections, _ = scene_of(path, schema, scene)
-    steps = (table[-1, 0] - table[0, 0]) / log_config(schema, sections)["dynamics"]["dt"]
+        _, config, _ = scene_of(path, schema, scene)
+    steps = (table[-1, 0] - table[0, 0]) / config["dynamics"]["dt"]
     every = max(1, int(round(steps / FRAMES)))
     with _RENDER:
-        frames = (replay_hand(table, sections, log_name, frame_every=every) if schema is HAND_LOG
-                  else replay(table, sections, frame_every=every)).frames
+        frames = (replay_hand(table, config, log_name, frame_every=every) if schema is HAND_LOG
+                  else replay(table, config, frame_every=every)).frames
     images = [Image.fromarray(f).convert("P", palette=Image.Palette.ADAPTIVE, colors=128) for f in frames]
     out = io.BytesIO()
     images[0].save(out, format="GIF", save_all=True, append_images=images[1:], loop=0,

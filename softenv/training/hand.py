@@ -2,12 +2,16 @@
 simulated laryngoscope. Its scene (SoftSphereHaptic-v0's, with a caller's sections), the hand's pose
 relative to its start, the workspace each column may span, the resampling of a log at the control
 period with the device's speed limits, and the path a hand on the device follows when a log asks
-for more. Scoring, the synthetic trainees and ``softenv play`` all speak it."""
+for more. Scoring, the synthetic trainees and ``softenv play`` all speak it.
+
+The scene is made once where it enters (:func:`haptic_config` from a caller's sections, in ``softenv play``,
+``softenv score`` and the skills lab) and passed inward as the made config; the functions here take that
+config, ``None`` meaning SoftSphereHaptic-v0's own."""
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -15,7 +19,7 @@ from ..devices.laryngoscope.params import LaryngoscopeParams
 from .._ops import ScalarOps
 from ..devices.laryngoscope.physics import hand_action, hand_command
 from ..envs import HAPTIC_SCENES
-from ..envs.config import scene_config, scene_sections
+from ..envs.config import check_config, scene_config, scene_sections
 from ..envs.single import SoftSphereEnv
 from ..sections import SceneConfig
 from .logs import HAND_LOG, MAX_GAP_S, check_limits, check_table
@@ -24,7 +28,16 @@ from .logs import HAND_LOG, MAX_GAP_S, check_limits, check_table
 def haptic_config(scene: dict[str, Any] | None) -> SceneConfig:
     """SoftSphereHaptic-v0's config with ``scene``'s sections merged in; a scene of another device is refused
     (a hand moves the laryngoscope: hand logs, play and their scoring need it)."""
-    config = scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene")
+    return _laryngoscope(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], scene_sections(scene), "scene"))
+
+
+def hand_config(config: SceneConfig | None) -> SceneConfig:
+    """``config`` (made by :func:`haptic_config`), or SoftSphereHaptic-v0's own for ``None``; a config of another
+    device is refused."""
+    return haptic_config(None) if config is None else _laryngoscope(check_config(config, "config", "haptic_config(sections)"))
+
+
+def _laryngoscope(config: SceneConfig) -> SceneConfig:
     kind = config["device"]["kind"]
     if kind != "laryngoscope":
         raise ValueError(f"device.kind={kind!r}: a hand-pose log moves the laryngoscope, so replaying and scoring "
@@ -32,12 +45,10 @@ def haptic_config(scene: dict[str, Any] | None) -> SceneConfig:
     return config
 
 
-def haptic_env(scene: dict[str, Any] | None, horizon: int, render_mode: str | None = None) -> Any:
-    """A SoftSphereHaptic-v0 env on ``scene``'s sections, reaching one target over ``horizon`` steps."""
-    haptic_config(scene)                              # the laryngoscope's scene, or a refusal naming device.kind
-    scene = scene_sections(scene)
-    scene["task"] = {**scene.get("task", {}), "kind": "reach", "horizon": horizon}
-    return SoftSphereEnv(render_mode=render_mode, base_scene=HAPTIC_SCENES["SoftSphereHaptic-v0"], **scene)
+def reach_env(config: SceneConfig, horizon: int, render_mode: str | None = None) -> Any:
+    """An env of the made ``config`` reaching one target over ``horizon`` steps (a replay's, a scripted hand's)."""
+    task = {**config["task"], "kind": "reach", "horizon": horizon}
+    return SoftSphereEnv.from_config(cast(SceneConfig, {**config, "task": task}), render_mode)
 
 
 def relative_hand_pose(env: Any) -> np.ndarray:
@@ -59,14 +70,14 @@ def hand_limits(config: SceneConfig) -> dict[str, tuple[float, float]]:
     return {c: (float(lo), float(hi)) for c, lo, hi in zip(HAND_LOG.columns[1:], low, high)}
 
 
-def hand_actions(table: np.ndarray, scene: dict[str, Any] | None = None,
+def hand_actions(table: np.ndarray, config: SceneConfig | None = None,
                  source: str = "trajectory") -> tuple[np.ndarray, np.ndarray]:
-    """Check a hand-pose log against the laryngoscope of ``scene`` and resample it at the control
+    """Check a hand-pose log against the laryngoscope of ``config`` and resample it at the control
     period: returns the control times ``(K,)`` (s, ends of each period) and the poses ``(K + 1, 4)``
     relative to the start. Errors name the row and column: a pose outside the hand's workspace, or a
     move faster than the device's speed limits."""
     table = check_table(table, HAND_LOG, source)
-    config = haptic_config(scene)
+    config = hand_config(config)
     relative = table.copy()
     relative[:, 0] -= table[0, 0]
     relative[:, 1:] -= table[0, 1:]
@@ -194,9 +205,9 @@ def _planar_action(v: np.ndarray, wall: np.ndarray, pitch: float, speed: float, 
     return best
 
 
-def speed_limited(pose: np.ndarray, dt: float, scene: dict[str, Any] | None) -> np.ndarray:
+def speed_limited(pose: np.ndarray, dt: float, config: SceneConfig) -> np.ndarray:
     """The path a hand on the device follows: each step's move scaled down to the speed limits."""
-    p = LaryngoscopeParams.from_config(haptic_config(scene))
+    p = LaryngoscopeParams.from_config(config)
     out = pose.copy()
     for k in range(len(pose) - 1):
         move = pose[k + 1] - out[k]

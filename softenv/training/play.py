@@ -28,13 +28,15 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..envs.config import scene_sections
 from ..haptics.arms import BACKENDS
 from ..haptics.bridge import LOOPBACK, BridgeServer
-from .hand import haptic_config, haptic_env, relative_hand_pose, workspace
+from ..sections import SceneConfig
+from .hand import hand_config, haptic_config, reach_env, relative_hand_pose, workspace
 from .inputs import ArmInput, BridgeInput, InputDevice, PygameInput
-from .logs import HAND_LOG, save_log
+from .logs import HAND_LOG, read_log, save_log
 from .play_view import SIZE, PlayView
-from .scoring import INCISOR_LIMIT_N, score_file
+from .scoring import INCISOR_LIMIT_N, score_log
 
 SCREEN_FPS = 30.0                     # the start and end screens' redraw rate in real time
 
@@ -72,10 +74,11 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
     """
     import pygame                       # the play extra: only for a session
 
-    config = haptic_config(scene)
+    sections = scene_sections(scene)
+    config = haptic_config(sections)                 # the session's scene, made once: the env and the scoring take it
     dt = config["dynamics"]["dt"]
     steps = max(1, int(round(seconds / dt)))
-    env = haptic_env(scene, steps)
+    env = reach_env(config, steps)
     world = env.world
     env.reset(seed=0, options={"target": world.force_box.normalised(world.family.centre)})
     # the display and fonts only (joysticks in PygameInput): pygame.init() would also open the mixer, whose
@@ -143,7 +146,8 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
         save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s, "
                  f"driven by {hand.describe()}", scene=scene)
         live = env.device.clinical_summary(env.b)
-        report = score_file(path, scene, out)
+        _, logged = read_log(path, HAND_LOG)         # scored as written (9 digits), as `softenv score` of the file is
+        report = score_log(logged, HAND_LOG, config, path, sections, "the log", out)
         echo(f"wrote {path}; score {report['score']:.1f}/100 ("
              + ", ".join(f"{k} {report[k]:.2f}" for k in report["weights"]) + f"); report in {out}/{path.stem}_score.md")
         for i, line in enumerate(report["advice"]):
@@ -185,21 +189,21 @@ def _is_quit(pygame: Any, event: Any) -> bool:
     return bool(event.type == pygame.QUIT or (event.type == pygame.KEYDOWN and event.key == pygame.K_ESCAPE))
 
 
-def open_bridge(host: str = LOOPBACK, port: int = 0, scene: dict[str, Any] | None = None) -> BridgeServer:
-    """A bridge for a device to drive a session on ``scene``, its poses checked against the hand's
-    workspace; refused in one line if the address cannot be bound."""
+def open_bridge(host: str = LOOPBACK, port: int = 0, config: SceneConfig | None = None) -> BridgeServer:
+    """A bridge for a device to drive a session on ``config`` (None: SoftSphereHaptic-v0's), its poses checked
+    against the hand's workspace; refused in one line if the address cannot be bound."""
     try:
-        return BridgeServer(workspace(haptic_config(scene)), host, port)
+        return BridgeServer(workspace(hand_config(config)), host, port)
     except OSError as exc:
         raise ValueError(f"--bridge {host}:{port} cannot be listened on: {exc.strerror or exc}") from None
 
 
-def open_haptic_device(kind: str, scene: dict[str, Any] | None = None) -> ArmInput:
+def open_haptic_device(kind: str, config: SceneConfig | None = None) -> ArmInput:
     """A vendor haptic arm (``touch`` or ``forcedimension``: :mod:`softenv.haptics.arms`) mapped
-    into the hand's workspace on ``scene``; refused in one line naming what to install if it cannot open."""
+    into the hand's workspace on ``config`` (None: SoftSphereHaptic-v0's); refused in one line naming what to install if it cannot open."""
     if kind not in BACKENDS:
         raise ValueError(f"--device {kind!r} is not one of {['keys', *BACKENDS]}")
-    return ArmInput(BACKENDS[kind](workspace(haptic_config(scene))))
+    return ArmInput(BACKENDS[kind](workspace(hand_config(config))))
 
 
 def display_available() -> bool:

@@ -22,10 +22,12 @@ teeth of manikins with other instruments), and success rates.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
+from ..sections import SceneConfig
+from .hand import hand_config
 from .scoring import Replay, replay_hand
 from .trainee import degrade
 
@@ -74,12 +76,13 @@ class Profile:
 
 
 def build(name: str, study: str, ratios: tuple[float, float, float], expert_log: np.ndarray, expert: Replay,
-          scene: dict[str, Any] | None = None, iterations: int = 14) -> Profile:
+          config: SceneConfig | None = None, iterations: int = 14) -> Profile:
     """The profile whose time to target, mean tongue force and hand path are ``ratios`` times the expert's."""
+    config = hand_config(config)
     amounts: dict[str, float] = {}
 
     def measure(amount: float, knob: str, of: Callable[[Replay], float]) -> float:
-        return of(replay_hand(_degraded(expert_log, scene, {**amounts, knob: amount}), scene)) / of(expert)
+        return of(replay_hand(_degraded(expert_log, config, {**amounts, knob: amount}), config)) / of(expert)
 
     for (knob, high, of), ratio in zip(KNOBS, ratios):
         if ratio <= 1.0:
@@ -89,13 +92,13 @@ def build(name: str, study: str, ratios: tuple[float, float, float], expert_log:
             middle = 0.5 * (low + high)
             low, high = (middle, high) if measure(middle, knob, of) < ratio else (low, middle)
         amounts[knob] = 0.5 * (low + high)
-    log = _degraded(expert_log, scene, amounts)
-    r = replay_hand(log, scene)
+    log = _degraded(expert_log, config, amounts)
+    r = replay_hand(log, config)
     reached = (time_to_target(r) / time_to_target(expert), mean_force(r) / mean_force(expert),
                hand_path(r) / hand_path(expert))
     return Profile(name, study, amounts, ratios, reached, log, r.peak_force_N)
 
 
-def _degraded(expert_log: np.ndarray, scene: dict[str, Any] | None, amounts: dict[str, float]) -> np.ndarray:
-    return degrade(expert_log, scene, hesitation=amounts.get("hesitation", 0.0), overshoot=amounts.get("overshoot", 0.0),
+def _degraded(expert_log: np.ndarray, config: SceneConfig, amounts: dict[str, float]) -> np.ndarray:
+    return degrade(expert_log, config, hesitation=amounts.get("hesitation", 0.0), overshoot=amounts.get("overshoot", 0.0),
                    tremor=amounts.get("tremor", 0.0))

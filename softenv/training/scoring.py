@@ -34,11 +34,10 @@ import numpy as np
 from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
-from ..envs.config import make_config, scene_sections
+from ..envs.config import check_config, make_config, scene_sections
 from ..envs.scene import degrees_to_features
-from ..envs.single import SoftSphereEnv
 from ..sections import SceneConfig
-from .hand import action_toward, hand_actions, haptic_config, haptic_env
+from .hand import action_toward, hand_actions, hand_config, haptic_config, reach_env
 from .logs import (FORCE_LOG, HAND_LOG, MAX_DURATION_S, Schema, check_limits, check_table, read_log, read_scene,
                    save_log)
 from .trainee import expert_hand_log
@@ -139,8 +138,14 @@ def check_ranges(table: np.ndarray, config: SceneConfig, source: str = "trajecto
         "sideways_N": (-dev["max_sideways_force"], dev["max_sideways_force"])}, source)
 
 
-def replay(table: np.ndarray, scene: dict[str, Any] | None = None, frame_every: int = 0) -> Replay:
-    """Replay a validated force-command log through a reach scene whose target is the family centre.
+def force_config(config: SceneConfig | None) -> SceneConfig:
+    """``config`` (made by :func:`softenv.make_config`), or SoftSphere-v0's own for ``None``: a force-command log's scene."""
+    return make_config() if config is None else check_config(config)
+
+
+def replay(table: np.ndarray, config: SceneConfig | None = None, frame_every: int = 0) -> Replay:
+    """Replay a validated force-command log through a reach scene whose target is the family centre
+    (``config``: :func:`force_config`).
 
     Each row is held until the next (zero-order hold) and sampled at the scene's ``dt``. With
     ``frame_every`` > 0, the scene's view is rendered every that many steps (and after the last) into ``frames``.
@@ -148,14 +153,12 @@ def replay(table: np.ndarray, scene: dict[str, Any] | None = None, frame_every: 
     check_int(frame_every, "frame_every", 0)
     table = check_trajectory(table).copy()
     table[:, 0] -= table[0, 0]                       # time counts from the first row
-    config = make_config(**scene_sections(scene))
+    config = force_config(config)
     check_ranges(table, config)
     dt = config["dynamics"]["dt"]
     times = (np.arange(max(1, int(math.floor(table[-1, 0] / dt + 1e-9)))) + 1) * dt
     rows = np.clip(np.searchsorted(table[:, 0], times - dt, side="right") - 1, 0, len(table) - 1)
-    sections = scene_sections(scene)
-    overrides = {**sections, "task": {**sections.get("task", {}), "kind": "reach", "horizon": len(times)}}
-    env = SoftSphereEnv(render_mode="rgb_array" if frame_every else None, **overrides)
+    env = reach_env(config, len(times), render_mode="rgb_array" if frame_every else None)
     world = env.world
     features = degrees_to_features(table[rows, 1:], config["tissue"]["radius"])
     # ranges are checked above, so the clip only removes rounding at the box's faces
@@ -192,15 +195,16 @@ def _replay(env: Any, times: np.ndarray, error: np.ndarray, force: np.ndarray, j
                   float(force.max()), float(force.mean()), float(force.sum() * dt), jerk_rms, **extra)
 
 
-def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory",
+def replay_hand(table: np.ndarray, config: SceneConfig | None = None, source: str = "trajectory",
                 frame_every: int = 0) -> Replay:
-    """Replay a hand-pose log through the laryngoscope and tongue (SoftSphereHaptic-v0's scene with
-    ``scene``'s sections) toward the family centre: each control period the hand is commanded the
-    velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
+    """Replay a hand-pose log through the laryngoscope and tongue (``config``, made by
+    :func:`~softenv.training.hand.haptic_config`; None: SoftSphereHaptic-v0's) toward the family centre:
+    each control period the hand is commanded the velocity that brings it from where it is to the log's next pose (closed loop, so rounding never
     accumulates). ``frame_every``: as for :func:`replay` (the view has the side view beside the tongue)."""
     check_int(frame_every, "frame_every", 0)
-    times, poses = hand_actions(table, scene, source)
-    env = haptic_env(scene, len(times), render_mode="rgb_array" if frame_every else None)
+    config = hand_config(config)
+    times, poses = hand_actions(table, config, source)
+    env = reach_env(config, len(times), render_mode="rgb_array" if frame_every else None)
     env.reset(seed=0, options={"target": _family_centre(env.world)})
     error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
     frames: list[np.ndarray] = []
@@ -211,7 +215,7 @@ def replay_hand(table: np.ndarray, scene: dict[str, Any] | None = None, source: 
     return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"], frames=frames)
 
 
-def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5.0, style: str = "expert") -> np.ndarray:
+def expert_trajectory(config: SceneConfig | None = None, duration_s: float = 5.0, style: str = "expert") -> np.ndarray:
     """A recorded-like trajectory of the laryngoscopy procedure toward the family centre.
 
     ``expert``: insert (first 30 %), press (to 60 %), sweep (to 80 %), hold; smooth (cosine ramps).
@@ -220,7 +224,7 @@ def expert_trajectory(scene: dict[str, Any] | None = None, duration_s: float = 5
     """
     check_real(duration_s, "duration_s", 0.1, MAX_DURATION_S)
     check_choice(style, "style", ("expert", "too_forceful", "wrong_direction"))
-    config = make_config(**scene_sections(scene))
+    config = force_config(config)
     task, dev = config["task"], config["device"]
     target = np.array([np.mean(task["target_insertion_deg"]), np.mean(task["target_lateral_deg"]),
                        np.mean(task["target_normal_force"]), np.mean(task["target_sideways_force"])])
@@ -277,13 +281,13 @@ def _common_parts(trainee: Replay, expert: Replay, safe_force: float) -> dict[st
     }
 
 
-def score_hand_log(table: np.ndarray, scene: dict[str, Any] | None = None, source: str = "trajectory",
+def score_hand_log(table: np.ndarray, config: SceneConfig | None = None, source: str = "trajectory",
                    expert: Replay | None = None) -> tuple[dict[str, float], Replay, Replay]:
-    """Score an in-memory hand-pose log; returns the parts, the trainee's and the expert's replays
-    (pass ``expert`` to reuse one replay over many logs)."""
-    trainee = replay_hand(table, scene, source)
-    expert = expert or replay_hand(expert_hand_log(scene), scene, "the expert's log")
-    config = haptic_config(scene)
+    """Score an in-memory hand-pose log on ``config`` (as :func:`replay_hand`); returns the parts, the trainee's
+    and the expert's replays (pass ``expert`` to reuse one replay over many logs)."""
+    config = hand_config(config)
+    trainee = replay_hand(table, config, source)
+    expert = expert or replay_hand(expert_hand_log(config), config, "the expert's log")
     rest_view = clinical.rest_view_analytic()
     return hand_score(trainee, expert, config["reward"]["safe_force"], rest_view), trainee, expert
 
@@ -295,14 +299,15 @@ def log_config(schema: Schema, scene: dict[str, Any] | None) -> SceneConfig:
 
 
 def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None,
-             named: str | None = None) -> tuple[dict[str, Any], str]:
-    """The scene a log is replayed on, and where it came from: the one it records (a ``scene`` that
-    makes another config is refused, named as the caller gave it: ``named``, else ``scene={...}``, never
-    silently used), else ``scene``, else the id's own."""
+             named: str | None = None) -> tuple[dict[str, Any], SceneConfig, str]:
+    """The scene a log is replayed on: its sections, its made config, and where it came from: the one it
+    records (a ``scene`` that makes another config is refused, named as the caller gave it: ``named``, else
+    ``scene={...}``, never silently used), else ``scene``, else the id's own."""
     source = f"trajectory {str(path)!r}"
     recorded = read_scene(path)
     if recorded is None:
-        return scene_sections(scene), "the caller" if scene else "the id's own (the log records none)"
+        sections = scene_sections(scene)
+        return sections, log_config(schema, sections), "the caller" if scene else "the id's own (the log records none)"
     try:
         config = log_config(schema, recorded)
     except ValueError as exc:
@@ -310,7 +315,7 @@ def scene_of(path: str | Path, schema: Schema, scene: dict[str, Any] | None,
     if scene is not None and log_config(schema, scene) != config:
         raise ValueError(f"{source} was recorded on scene {recorded}; {named or f'scene={scene}'} asks for another scene "
                          "(omit it to replay the log on its own)")
-    return recorded, "the log"
+    return recorded, config, "the log"
 
 
 def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: str | Path | None = None,
@@ -322,21 +327,28 @@ def score_file(path: str | Path, scene: dict[str, Any] | None = None, out_dir: s
     Arguments and file are checked before any replay."""
     if out_dir is not None:
         check_out_dir(out_dir, "out directory")
-    source = f"trajectory {str(path)!r}"
     schema, table = read_log(path)
-    scene, scene_from = scene_of(path, schema, scene, scene_named)
-    config = log_config(schema, scene)
+    sections, config, scene_from = scene_of(path, schema, scene, scene_named)
+    return score_log(table, schema, config, path, sections, scene_from, out_dir)
+
+
+def score_log(table: np.ndarray, schema: Schema, config: SceneConfig, path: str | Path, sections: dict[str, Any],
+              scene_from: str, out_dir: str | Path | None = None) -> dict[str, Any]:
+    """Score a log read from ``path`` on its made ``config`` (``sections``, from ``scene_from``, as the report
+    names them): :func:`score_file` after it has read the file and made the scene, or a session that
+    made its scene itself. With ``out_dir`` (checked by the caller), write the report's three files."""
+    source = f"trajectory {str(path)!r}"
     safe_force = config["reward"]["safe_force"]
     if schema is HAND_LOG:
-        parts, trainee, expert = score_hand_log(table, scene, source)
+        parts, trainee, expert = score_hand_log(table, config, source)
         expert_parts = hand_score(expert, expert, safe_force, clinical.rest_view_analytic())
         formula, weights = HAND_FORMULA, HAND_WEIGHTS
     else:
         check_ranges(table, config, source)
-        trainee, expert = replay(table, scene), replay(expert_trajectory(scene), scene)
+        trainee, expert = replay(table, config), replay(expert_trajectory(config), config)
         parts, expert_parts = score(trainee, expert, safe_force), score(expert, expert, safe_force)
         formula, weights = FORMULA, WEIGHTS
-    report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": scene, "scene_from": scene_from, **parts,
+    report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": sections, "scene_from": scene_from, **parts,
               "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,
               "points_to_gain": points_to_gain(parts, expert_parts, weights),
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}

@@ -21,13 +21,13 @@ scaled down to the speed limit), as a real hand on the device would.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
 from .._validation import check_int, check_real
 from ..devices.laryngoscope.control import HandController
-from .hand import hand_limits, haptic_config, haptic_env, relative_hand_pose, speed_limited
+from ..sections import SceneConfig
+from .hand import hand_config, hand_limits, reach_env, relative_hand_pose, speed_limited
 from .logs import HAND_LOG, Schema, check_table
 
 TREMOR_HZ = 8.0
@@ -37,13 +37,15 @@ LEVER_FULL_RAD, LEVER_RISE_M = 0.3, 0.005   # from this lever on, the hand no lo
 LIMITS = {"tremor": 5.0, "hesitation": 60.0, "lever": 0.5, "overshoot": 50.0, "direction": 1.0}
 
 
-def expert_hand_log(scene: dict[str, Any] | None = None, duration_s: float = 5.0) -> np.ndarray:
+def expert_hand_log(config: SceneConfig | None = None, duration_s: float = 5.0) -> np.ndarray:
     """The scripted expert's hand log ``(n, 5)`` (``time_s`` and the relative hand pose) toward the
-    centre of the scene's laryngoscopy family."""
+    centre of the scene's laryngoscopy family (``config``: made by :func:`~softenv.training.hand.haptic_config`;
+    None: SoftSphereHaptic-v0's)."""
     check_real(duration_s, "duration_s", 0.1, 600.0)
-    dt = haptic_config(scene)["dynamics"]["dt"]
+    config = hand_config(config)
+    dt = config["dynamics"]["dt"]
     steps = max(1, int(round(duration_s / dt)))
-    env = haptic_env(scene, steps)
+    env = reach_env(config, steps)
     world = env.world
     target = world.family.centre
     controller = HandController(world.config)
@@ -67,13 +69,14 @@ def withdrawn(log: np.ndarray, schema: Schema = HAND_LOG, settle_s: float = 0.5)
     return np.concatenate([log, back])
 
 
-def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float = 0.0, hesitation: float = 0.0,
+def degrade(log: np.ndarray, config: SceneConfig | None = None, tremor: float = 0.0, hesitation: float = 0.0,
             lever: float = 0.0, overshoot: float = 0.0, direction: float = 0.0, seed: int = 0) -> np.ndarray:
     """The hand log ``log`` with a trainee's errors (see the module docstring; amounts >= 0)."""
     amounts = {"tremor": tremor, "hesitation": hesitation, "lever": lever, "overshoot": overshoot, "direction": direction}
     for name, value in amounts.items():
         check_real(value, name, 0.0, LIMITS[name])
     check_int(seed, "seed", 0, 2**32 - 1)
+    config = hand_config(config)
     log = check_table(log, HAND_LOG, "log").copy()
     t: np.ndarray = log[:, 0] - log[0, 0]                  # the log's own clock does not matter
     pose = log[:, 1:].copy()
@@ -94,8 +97,8 @@ def degrade(log: np.ndarray, scene: dict[str, Any] | None = None, tremor: float 
     if hesitation > 0.0:
         moving = np.flatnonzero(np.any(np.abs(np.diff(log[:, 1:], axis=0)) > 1e-4, axis=1))   # faster than 5 mm/s
         t, pose = _pause(t, pose, hesitation, (moving[0], moving[-1] + 1) if moving.size else (0, len(t) - 1))
-    limits = np.array(list(hand_limits(haptic_config(scene)).values()))      # (4, 2): the workspace per column
-    return np.column_stack([t, speed_limited(np.clip(pose, limits[:, 0], limits[:, 1]), float(t[1] - t[0]), scene)])
+    limits = np.array(list(hand_limits(config).values()))      # (4, 2): the workspace per column
+    return np.column_stack([t, speed_limited(np.clip(pose, limits[:, 0], limits[:, 1]), float(t[1] - t[0]), config)])
 
 
 def _pause(t: np.ndarray, pose: np.ndarray, pause: float, movement: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -117,17 +120,18 @@ LOWERS = {"tremor": "smoothness", "hesitation": "speed", "lever": "teeth", "over
 
 
 def skill_population(expert_log: np.ndarray, levels: int = 5, per_level: int = 20, seed: int = 0,
-                     scene: dict[str, Any] | None = None) -> list[tuple[int, dict[str, float], np.ndarray]]:
+                     config: SceneConfig | None = None) -> list[tuple[int, dict[str, float], np.ndarray]]:
     """Trainees at graded skill: error level ``L`` of ``0 .. levels - 1`` (skill ``levels - 1 - L``) degrades the expert's log by every
     error of :data:`WORST` at ``L / (levels - 1)`` of its worst amount, times a factor drawn from
     [0.5, 1.5] per trainee and error (level 0 is the expert). Returns ``(level, amounts, log)``."""
     rng = np.random.default_rng(seed)
+    config = hand_config(config)
     out = []
     for level in range(levels):
         for _ in range(per_level):
             share = level / max(levels - 1, 1)
             amounts = {name: float(share * worst * rng.uniform(0.5, 1.5)) for name, worst in WORST.items()}
-            out.append((level, amounts, degrade(expert_log, scene, seed=int(rng.integers(1 << 31)), **amounts)))
+            out.append((level, amounts, degrade(expert_log, config, seed=int(rng.integers(1 << 31)), **amounts)))
     return out
 
 
