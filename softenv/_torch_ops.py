@@ -21,9 +21,17 @@ class TorchOps:
     ``array_api_compat``, with numpy's names) for the code that is written for whole arrays."""
 
     xp = xp_torch
-    sqrt = staticmethod(torch.sqrt)
     cos = staticmethod(torch.cos)
     sin = staticmethod(torch.sin)
+
+    @staticmethod
+    def sqrt(x: torch.Tensor) -> torch.Tensor:
+        """``torch.sqrt``, bit for bit; under autograd its gradient at 0 (a force's size at no contact, where
+        torch's is 0 times infinity: NaN) is 0, a subgradient of the norm it takes there."""
+        if not x.requires_grad:
+            return torch.sqrt(x)
+        positive = x > 0.0
+        return torch.where(positive, torch.sqrt(torch.where(positive, x, 1.0)), torch.sqrt(x.detach()))
 
     @staticmethod
     def exp(x: Any) -> Any:

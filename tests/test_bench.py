@@ -110,3 +110,17 @@ def test_the_pinned_allocator_row_times_the_twin_in_a_child_with_the_threshold_p
         return
     assert row.value > 0 and row.unit == "env-steps/s"
     assert re.fullmatch(r"\d+ page faults a step; [\d.]+x the run above", row.spread), row.spread
+
+
+def test_the_gradients_section_times_an_episode_backward_and_its_graph_on_both_devices():
+    """``softenv bench --only gradients`` (quick sizes): each device kind's backward pass over its forward step,
+    measured in a fresh process, and the memory its graph holds."""
+    from softenv.bench.gradients import bench_gradients
+
+    rows = bench_gradients(True, None)
+    assert [r.metric.split(":")[0] for r in rows] == ["SoftSphere-v0"] * 2 + ["SoftSphereHaptic-v0"] * 2
+    for r in rows:
+        assert np.isfinite(r.value) and r.value > 0, r
+    ratio, memory = rows[0], rows[1]
+    assert ratio.unit == "x the forward step" and ratio.target == "<= 3x" and ratio.ok == (ratio.value <= 3.0)
+    assert memory.unit == "MB" and "KB an env-step" in memory.spread

@@ -26,6 +26,7 @@ SECTIONS: dict[str, tuple[str, str]] = {
     "env": ("softenv.bench.env", "bench_env"),
     "sb3": ("softenv.bench.env", "bench_sb3"),
     "torch": ("softenv.bench.env", "bench_torch"),
+    "gradients": ("softenv.bench.gradients", "bench_gradients"),   # the torch twin with differentiable=True
     "haptic": ("softenv.bench.haptic", "bench_haptic"),
     "bridge": ("softenv.bench.bridge", "bench_bridge"),
     "play": ("softenv.bench.play", "bench_play"),

@@ -187,6 +187,16 @@ class DeviceTensors(DeviceNames, Protocol):
         step, this device's work inlined (``fullgraph``)."""
         ...
 
+    def differentiable(self) -> None:
+        """The twin's ``differentiable=True``: from now on :meth:`act`, :meth:`observation` and :meth:`report`
+        carry torch autograd's graph from the actions and the device's state (held out of place), or raise a
+        ``ValueError`` naming the setting this device cannot differentiate."""
+        ...
+
+    def detach(self) -> None:
+        """Cut autograd's graph at the device's current state (the twin's ``detach()``)."""
+        ...
+
 
 @dataclass(frozen=True)
 class DeviceKind:

@@ -43,3 +43,9 @@ class IdealDeviceTensors:
 
     def compile(self, options: dict[str, Any]) -> bool:
         return False                 # a few elementwise operations: compiled with the env's step
+
+    def differentiable(self) -> None:
+        """The action maps to the force affinely: torch differentiates it as it is."""
+
+    def detach(self) -> None:
+        """No state of its own."""

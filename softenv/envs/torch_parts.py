@@ -155,11 +155,11 @@ class DeviceEpisodes:
         chosen = torch.ones(n, dtype=torch.bool, device=device) if mask is None else torch.as_tensor(mask, device=device)
         fresh = torch.tensor([s is not None for s in seeds], device=device) & chosen
         given = torch.tensor([as_int64(s) if s is not None else 0 for s in seeds], device=device)
-        keep(fresh, given, self.seed)
+        self.seed = keep(fresh, given, self.seed)
         torch.where(fresh, torch.zeros_like(self.episode), self.episode + chosen.to(torch.int64), out=self.episode)
         self.seeded = True
         features = self.draw() if target is None else self.tensor(np.broadcast_to(target, (n, 4)))
-        keep(chosen[:, None], features.to(self.features.dtype), self.features)
+        self.features = keep(chosen[:, None], features.to(self.features.dtype), self.features)
         self._begin(chosen)
 
     def draw(self) -> torch.Tensor:
@@ -172,17 +172,17 @@ class DeviceEpisodes:
     def restart(self, mask: torch.Tensor) -> bool:
         """Start the masked envs' next episodes (for every env at once: no host read)."""
         self.episode += mask.to(torch.int64)
-        keep(mask[:, None], self.draw().to(self.features.dtype), self.features)
+        self.features = keep(mask[:, None], self.draw().to(self.features.dtype), self.features)
         self._begin(mask)
         return True
 
     def _begin(self, mask: torch.Tensor) -> None:
         step0 = torch.zeros(len(mask), dtype=torch.int64, device=mask.device)
-        keep(mask[:, None], self.lookup(self._schedule(step0)), self.target)
+        self.target = keep(mask[:, None], self.lookup(self._schedule(step0)), self.target)
         zero = torch.zeros_like(self.zero_cum)
-        keep(mask, zero, self.zero_cum)
-        keep(mask, zero, self.oracle_cum)
-        keep(mask[:, None], self.b_rest, self.creep)
+        self.zero_cum = keep(mask, zero, self.zero_cum)
+        self.oracle_cum = keep(mask, zero, self.oracle_cum)
+        self.creep = keep(mask[:, None], self.b_rest, self.creep)
 
     def _schedule(self, step: torch.Tensor) -> torch.Tensor:
         if self.world.task_kind == "reach":
@@ -206,9 +206,9 @@ class DeviceEpisodes:
             creep = self.creep.clone()                      # step advances it in place
             d = dyn.step(creep, target) - target
             oracle_cum = oracle_cum + torch.sqrt(torch.sum(d * d, dim=-1) / sq_ref).to(torch.float64)
-            keep(stepped[:, None], creep, self.creep)
-        keep(stepped, zero_cum, self.zero_cum)
-        keep(stepped, oracle_cum, self.oracle_cum)
+            self.creep = keep(stepped[:, None], creep, self.creep)
+        self.zero_cum = keep(stepped, zero_cum, self.zero_cum)
+        self.oracle_cum = keep(stepped, oracle_cum, self.oracle_cum)
         return target, sq_ref, zero_cum, oracle_cum
 
     def upcoming(self, t: torch.Tensor) -> torch.Tensor:
@@ -220,10 +220,15 @@ class DeviceEpisodes:
         return self.target               # right after _begin, the masked rows hold their first target
 
 
-def keep(mask: torch.Tensor, new: torch.Tensor, state: torch.Tensor) -> None:
-    """``state = where(mask, new, state)``, written into ``state``'s own storage. The env's state tensors
-    never move, so a captured CUDA graph, which replays fixed addresses, reads and writes the live state."""
-    torch.where(mask, new, state, out=state)
+def keep(mask: torch.Tensor, new: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+    """``where(mask, new, state)``, returned for the caller to hold as the state (``x = keep(m, new, x)``).
+    Without gradients it is written into ``state``'s own storage and ``state`` returned: the env's state
+    tensors never move, so a captured CUDA graph, which replays fixed addresses, reads and writes the live
+    state. Where either carries autograd's graph (``differentiable=True``) it is a new tensor: an in-place
+    write would change a tensor an earlier step saved for its backward."""
+    if new.requires_grad or state.requires_grad:
+        return torch.where(mask, new, state)
+    return torch.where(mask, new, state, out=state)
 
 
 def sum_dtype(name: str, dtype: torch.dtype | None) -> torch.dtype | None:

@@ -16,7 +16,8 @@ dict, and any device kind with a tensor form (``DeviceKind.tensors``: the ideal 
 laryngoscope on float64 tensors: the Warp kernel on CPU, bit for bit with the numpy twin's, and one
 Triton kernel a step on CUDA by default; ``compile_options`` compiles the env's work around the
 device's step).
-Not: regressor responses and vertex observations.
+Not: regressor responses and vertex observations. With ``differentiable=True`` the same step carries torch
+autograd's graph (``docs/gradients.md``).
 
 Where episodes come from (``target_draw``): ``"host"`` (default) draws the targets with the per-env
 numpy generators and precomputes each episode on the host, so it plays the numpy twin's episodes;
@@ -78,6 +79,11 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             a step's host work is then one copy of the actions and one graph launch, without dynamo's and
             the CUDA-graph trees' per-call checks. Needs a CUDA device and ``target_draw="device"``; a
             step's outputs live until the next step: clone what you keep.
+        differentiable: carry torch autograd's graph from actions that require grad through every step
+            (the state held out of place; the laryngoscope on Warp's adjoint): rewards, infos and
+            observations then have gradients to the episode's actions. ``detach()`` cuts the graph;
+            ``reset()`` starts afresh. Not with ``compile_options`` or ``cuda_graph``. See the docs'
+            "Gradients through softenv".
         Others as :class:`~softenv.envs.vector.SoftSphereVectorEnv`.
 
     Infos are dicts of tensors with ``_key`` masks, as the numpy twin's; with ``autoreset_mode="same_step"``
@@ -92,7 +98,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                  max_episode_steps: int | None = None, autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
                  base_scene: dict[str, Any] | None = None, torch_device: str | torch.device = "cpu",
                  dtype: torch.dtype = torch.float64, check_actions: bool = True, target_draw: str = "host",
-                 compile_options: dict[str, Any] | None = None, cuda_graph: bool = False, **scene: Any) -> None:
+                 compile_options: dict[str, Any] | None = None, cuda_graph: bool = False, differentiable: bool = False,
+                 **scene: Any) -> None:
         if not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} must be an int >= 1")
         if render_mode is not None:
@@ -109,6 +116,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                              f"that makes CUDA graphs of its own (got compile_options={compile_options!r})")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
+        if differentiable and (compile_options is not None or cuda_graph):
+            raise ValueError(f"differentiable=True steps eagerly: it takes neither compile_options={compile_options!r} "
+                             f"nor cuda_graph={cuda_graph!r} (their state lives at fixed addresses, written in place)")
         world = World(scene_config(base_scene, scene, f"{type(self).__name__}.__init__()"), obs_mode)
         self.max_episode_steps = episode_limit(max_episode_steps, world.horizon)
         kind = world.device_kind
@@ -138,6 +148,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._rest_features = t(world.scene.rest_features)
         n, k = self.num_envs, world.k
         self._device = kind.tensors(world.scene, world.config, n, self.torch_device, dtype)
+        self.differentiable = bool(differentiable)
+        if self.differentiable:
+            self._device.differentiable()
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
@@ -177,6 +190,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if mask is not None and not self._started:
             raise RuntimeError("call reset() without a reset_mask first: there are no episodes to go on from")
         self._episodes.reset(seed, options, mask)
+        if mask is None and self.differentiable:
+            self.detach()                        # every episode starts afresh: nothing before it has a gradient
         chosen = torch.ones(self.num_envs, dtype=torch.bool, device=self.torch_device) if mask is None \
             else torch.as_tensor(mask, device=self.torch_device)
         if mask is None:
@@ -228,6 +243,13 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._autoreset.copy_(terminated | truncated)
         return obs, reward, terminated, truncated, infos
 
+    def detach(self) -> None:
+        """Cut autograd's graph at the current state (``differentiable=True``): later steps' gradients stop
+        here, and the memory the graph held is freed (truncated backpropagation through time)."""
+        for name in ("_z", "_b", "_prev", "_features", "_agent_cum", "_peak", "_last_target"):
+            setattr(self, name, getattr(self, name).detach())
+        self._device.detach()
+
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:
@@ -247,7 +269,15 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         return a.to(self.dtype)
 
     def _response(self, x: torch.Tensor) -> torch.Tensor:
-        """The response table's multilinear interpolation (as :meth:`TabulatedResponse.lookup`)."""
+        """The response table's multilinear interpolation (as :meth:`TabulatedResponse.lookup`); under
+        autograd through :class:`_Lookup`, which keeps the features, not every corner's row."""
+        if x.requires_grad:
+            return _Lookup.apply(x, self)
+        return self._interpolate(x)
+
+    def _corners(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Where ``x`` lies in the table: each axis's pair of weights ``(N, d, 2)`` (1 - frac, frac), the
+        corners' weights ``(N, 2**d)`` and the cell's first row ``(N,)``."""
         t = (x - self._low) * self._inv_step
         cell = torch.clamp(torch.floor(t), min=0.0)
         frac = t - cell
@@ -255,7 +285,10 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         w = g[:, 0, self._bits[:, 0]]
         for j in range(1, x.shape[1]):
             w = w * g[:, j, self._bits[:, j]]
-        base = torch.sum(cell.to(torch.int64) * self._strides, dim=-1)
+        return g, w, torch.sum(cell.to(torch.int64) * self._strides, dim=-1)
+
+    def _interpolate(self, x: torch.Tensor) -> torch.Tensor:
+        _, w, base = self._corners(x)
         # corner by corner, not a gather of rows and a bmm: compiled, one elementwise kernel reading the
         # table's rows where they lie (docs/performance.md: measured choices)
         out = w[:, :1] * self._flat[base + self._offsets[0]]
@@ -283,13 +316,13 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         success = ratio < w.tolerance
         s = stepped
         rows = s[:, None]
-        keep(rows, z, self._z)
-        keep(rows, b, self._b)
-        keep(rows, a, self._prev)
-        keep(rows, f, self._features)
-        keep(s, agent_cum, self._agent_cum)
-        keep(s, peak, self._peak)
-        keep(rows, target, self._last_target)
+        self._z = keep(rows, z, self._z)
+        self._b = keep(rows, b, self._b)
+        self._prev = keep(rows, a, self._prev)
+        self._features = keep(rows, f, self._features)
+        self._agent_cum = keep(s, agent_cum, self._agent_cum)
+        self._peak = keep(s, peak, self._peak)
+        self._last_target = keep(rows, target, self._last_target)
         self._t += s.to(torch.int64)
         terminated = (success & w.terminate_on_success) & s
         truncated = (self._t >= self.max_episode_steps) & s
@@ -333,14 +366,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def _start(self, mask: torch.Tensor) -> None:
         rows = mask[:, None]
-        keep(rows, self._b_rest, self._z)
-        keep(rows, self._b_rest, self._b)
-        keep(rows, self._rest_features, self._features)
-        keep(rows, self._device.reset(mask), self._prev)
-        keep(mask, torch.zeros_like(self._t), self._t)
-        keep(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
-        keep(mask, torch.zeros_like(self._peak), self._peak)
-        keep(rows, self._episodes.first(), self._last_target)
+        self._z = keep(rows, self._b_rest, self._z)
+        self._b = keep(rows, self._b_rest, self._b)
+        self._features = keep(rows, self._rest_features, self._features)
+        self._prev = keep(rows, self._device.reset(mask), self._prev)
+        self._t = keep(mask, torch.zeros_like(self._t), self._t)
+        self._agent_cum = keep(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
+        self._peak = keep(mask, torch.zeros_like(self._peak), self._peak)
+        self._last_target = keep(rows, self._episodes.first(), self._last_target)
 
     def _episodes_may_start(self) -> bool:
         """Whether an env can start an episode this step. Without success termination every episode lasts
@@ -370,6 +403,36 @@ def run_apart(device: DeviceTensors) -> None:
     that keeps its step apart (:meth:`~softenv.devices.base.DeviceTensors.compile` returns True)."""
     for name in DEVICE_CALLS:
         setattr(device, name, torch.compiler.disable(getattr(device, name)))
+
+
+class _Lookup(torch.autograd.Function):
+    """The table's interpolation for autograd, saving only the features: a step's corners' rows (``2**d``
+    of them, each ``k`` floats) would be most of an episode's graph. Backward gathers them again:
+    d out / d x_j = inv_step_j sum_c (+-prod_{i != j} g_i) row_c, the sign that of corner c's bit j (the
+    derivative of the weights' product in frac_j; the floor has none)."""
+
+    @staticmethod
+    def forward(ctx: Any, x: torch.Tensor, env: SoftSphereTorchVectorEnv) -> torch.Tensor:
+        ctx.save_for_backward(x)
+        ctx.env = env
+        return env._interpolate(x)
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (x,), env = ctx.saved_tensors, ctx.env
+        g, _, base = env._corners(x)
+        bits, d = env._bits, x.shape[1]
+        # each corner's row against the incoming gradient: (N, 2**d)
+        dots = torch.stack([torch.sum(env._flat[base + offset] * grad, dim=-1) for offset in env._offsets], dim=-1)
+        out = torch.empty_like(x)
+        for j in range(d):
+            others = torch.ones_like(dots)
+            for i in range(d):
+                if i != j:
+                    others = others * g[:, i, bits[:, i]]
+            sign = bits[:, j].to(x.dtype) * 2.0 - 1.0
+            out[:, j] = torch.sum(sign * others * dots, dim=-1) * env._inv_step[j]
+        return out, None
 
 
 def usable_device(value: Any) -> torch.device:

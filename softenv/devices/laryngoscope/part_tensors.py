@@ -52,16 +52,19 @@ class LaryngoscopeTensorPart:
 
     def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
                  dtype: torch.dtype) -> None:
-        engine = tensor_engine(config["device"]["batch_engine"], torch_device)
-        self.laryngoscopes = engine(*laryngoscope_parts(scene, config), n, torch_device)
+        self._engine_name, self._parts = config["device"]["batch_engine"], laryngoscope_parts(scene, config)
+        self._use(tensor_engine(self._engine_name, torch_device), n, torch_device)
         self.dtype = dtype
-        start = self.laryngoscopes.start_state(n)
-        self._start_state = DeviceState(*(self.laryngoscopes._array(v) for v in vars(start).values()))  # type: ignore[arg-type]
         t = self.laryngoscopes._array
         self._low, self._high = t(scene.workspace.low), t(scene.workspace.high)
         self._rest = t(scene.rest_features)
         self._prev = torch.zeros(4, dtype=dtype, device=torch_device)
         self._weights = config["reward"].copy()
+
+    def _use(self, engine: type[LaryngoscopeTensors], n: int, torch_device: torch.device) -> None:
+        self.laryngoscopes = engine(*self._parts, n, torch_device)
+        start = self.laryngoscopes.start_state(n)
+        self._start_state = DeviceState(*(self.laryngoscopes._array(v) for v in vars(start).values()))  # type: ignore[arg-type]
 
     def reset(self, mask: torch.Tensor) -> torch.Tensor:
         self.laryngoscopes.load_state(self._start_state, rows=mask)
@@ -86,3 +89,18 @@ class LaryngoscopeTensorPart:
         """Keep the device's step apart: its engine is a kernel already (Warp's or Triton's), so the env
         compiles its own work around the device's calls."""
         return True
+
+    def differentiable(self) -> None:
+        """Gradients come from the Warp kernel's adjoint, a control period at a time
+        (:func:`~.warp_tensors.differentiable_rollout`). Triton's kernel has none: ``device.batch_engine='auto'``
+        then runs Warp where it would have run Triton, and ``'triton'`` is refused."""
+        dev = self.laryngoscopes
+        if not dev.has_adjoint:
+            if self._engine_name != "auto":
+                raise ValueError(f"device.batch_engine={self._engine_name!r} has no adjoint, so differentiable=True "
+                                 "cannot take gradients through it: choose 'warp' or 'auto' (Warp's adjoint)")
+            self._use(tensor_engine("warp", dev.torch_device), dev.n, dev.torch_device)
+        self.laryngoscopes.taped = True
+
+    def detach(self) -> None:
+        self.laryngoscopes.detach()

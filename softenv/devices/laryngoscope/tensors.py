@@ -29,6 +29,8 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
     _own: Any = staticmethod(torch.clone)
 
     _STATE = ("_blade", "_hand", "_lateral", "_contact", "_incisor", "_hand_v")     # what a step reads from the last
+    has_adjoint = False         # an engine whose control step torch autograd can follow (Warp's) sets it
+    taped = False               # set by the torch twin's differentiable=True: control steps carry the graph
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:
@@ -58,5 +60,14 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
                                    ("_contact", contact[:, :4], m), ("_incisor", contact[:, 4], mask),
                                    ("_hand_v", t(s.hand_velocity), m)]:
             held = getattr(self, name)
-            held.copy_(torch.where(where, value, held))
+            if held.requires_grad:          # a taped state: out of place, as an earlier step may have saved it
+                setattr(self, name, torch.where(where, value, held))
+            else:
+                held.copy_(torch.where(where, value, held))
+        self._forget()
+
+    def detach(self) -> None:
+        """Cut autograd's graph at the current state (a taped engine's)."""
+        for name in self._STATE:
+            setattr(self, name, getattr(self, name).detach())
         self._forget()

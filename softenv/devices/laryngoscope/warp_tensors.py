@@ -19,7 +19,11 @@ from .warp_kernel import Device, close_period, control_period, f64, one_substep,
 
 class LaryngoscopeWarpTensors(LaryngoscopeTensors):
     """:class:`~.tensors.LaryngoscopeTensors`' state and readings, each control period one launch of the
-    Warp kernel on the tensors' device: on CPU every device equals a single pymunk device bit for bit."""
+    Warp kernel on the tensors' device: on CPU every device equals a single pymunk device bit for bit.
+    ``taped``: each control period runs through :func:`differentiable_rollout` instead (the same substeps,
+    with their adjoint), its state held as the tensors autograd returns."""
+
+    has_adjoint = True
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:
@@ -32,6 +36,12 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
         their hands still (their results are discarded by the caller)."""
         if moving is not None:
             actions = torch.where(moving[:, None], actions, 0.0)
+        if self.taped:
+            period = differentiable_rollout(self, self._blade, self._hand, self._lateral, actions[None])
+            for name, field in zip(("_blade", "_hand", "_lateral", "_hand_v", "_contact", "_incisor"), ROLLOUT_FIELDS):
+                setattr(self, name, period[field][0])
+            self._forget()
+            return
         arrays = [wp.from_torch(x, dtype=f64) for x in (self._blade, self._hand, self._lateral, self._hand_v,
                                                          self._contact, self._incisor,
                                                          actions.to(torch.float64).contiguous())]

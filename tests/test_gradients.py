@@ -1,0 +1,90 @@
+"""Gradients through whole episodes of the torch twin (``differentiable=True``), on both device kinds: the
+same values as the plain twin bit for bit, gradients of the episode's reward with respect to every action
+against central finite differences in float64, the graph kept through an autoreset, cut by ``detach()``,
+and the settings it cannot take refused by name."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import softenv  # noqa: F401  (registers the ids)
+
+RELATIVE_BOUND = 1e-6     # central differences at step 1e-6 in float64 agree to ~1e-8 of the gradient's scale
+
+
+def _rollout(env_id: str, actions: torch.Tensor, differentiable: bool, **scene) -> tuple[torch.Tensor, object]:
+    """Each step's reward ``(T, n)`` of ``actions`` ``(T, n, 4)`` from ``reset(seed=0)``, and the env."""
+    env = gym.make_vec(f"softenv:{env_id}", num_envs=actions.shape[1], vectorization_mode="vector_entry_point",
+                       backend="torch", differentiable=differentiable, **scene)
+    env.reset(seed=0)
+    rewards = [env.step(a)[1] for a in actions]
+    return torch.stack(rewards), env
+
+
+def _actions(steps: int, n: int, seed: int, press: float) -> torch.Tensor:
+    a = np.random.default_rng(seed).uniform(-0.3, 0.3, (steps, n, 4))
+    a[:, :, 1] += press                    # the laryngoscope's press axis: onto the tongue within the episode
+    return torch.as_tensor(a)
+
+
+CASES = {
+    "ideal, reach": ("SoftSphere-v0", 25, 0.0, {}),
+    "ideal, creep": ("SoftSphereViscoelastic-v0", 25, 0.0, {}),
+    "ideal, procedure": ("SoftSphereProcedure-v0", 25, 0.0, {}),
+    "laryngoscope, pressing": ("SoftSphereHaptic-v0", 40, 0.6, {}),
+}
+
+
+@pytest.mark.parametrize("case", CASES, ids=list(CASES))
+def test_episode_gradients_match_central_differences(case):
+    env_id, steps, press, scene = CASES[case]
+    a0 = _actions(steps, 2, 1, press)
+    plain, _ = _rollout(env_id, a0, False, **scene)
+    a = a0.clone().requires_grad_(True)
+    rewards, _ = _rollout(env_id, a, True, **scene)
+    assert torch.equal(rewards.detach(), plain)                  # the same step, bit for bit
+    rewards.sum().backward()
+    assert a.grad.abs().sum() > 0
+    scale = a.grad.abs().max().item()
+    rng = np.random.default_rng(2)
+    for _ in range(4):                                             # entries across the episode, both envs, all axes
+        i = (int(rng.integers(steps)), int(rng.integers(2)), int(rng.integers(4)))
+        up, down = a0.clone(), a0.clone()
+        up[i] += 1e-6
+        down[i] -= 1e-6
+        fd = (_rollout(env_id, up, False, **scene)[0].sum() - _rollout(env_id, down, False, **scene)[0].sum()) / 2e-6
+        assert abs(a.grad[i].item() - fd.item()) <= RELATIVE_BOUND * scale + 1e-9, (i, a.grad[i].item(), fd.item())
+
+
+def test_the_graph_survives_an_autoreset_and_detach_cuts_it():
+    """An episode that ends inside the rollout starts the next with the state written out of place (no
+    in-place error at backward); after ``detach()`` later rewards have no gradient to earlier actions."""
+    a = _actions(12, 2, 3, 0.0).requires_grad_(True)
+    env = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                       differentiable=True, task={"horizon": 5})
+    env.reset(seed=0)
+    rewards = torch.stack([env.step(x)[1] for x in a[:8]])             # ends at step 5, next-step autoreset at 6
+    rewards.sum().backward()
+    assert a.grad[:5].abs().sum() > 0 and a.grad[8:].abs().sum() == 0
+    a.grad = None
+    env.unwrapped.detach()
+    late = torch.stack([env.step(x)[1] for x in a[8:]])
+    late.sum().backward()
+    assert a.grad[:8].abs().sum() == 0 and a.grad[8:].abs().sum() > 0
+
+
+def test_settings_it_cannot_differentiate_are_refused_by_name():
+    with pytest.raises(ValueError, match="differentiable=True steps eagerly: it takes neither compile_options"):
+        gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                     differentiable=True, target_draw="device", compile_options={})
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="Triton runs on CUDA only")
+def test_the_triton_engine_is_refused_and_auto_runs_warp_with_gradients_on():
+    make = dict(num_envs=2, vectorization_mode="vector_entry_point", backend="torch", torch_device="cuda",
+                differentiable=True)
+    with pytest.raises(ValueError, match="device.batch_engine='triton' has no adjoint"):
+        gym.make_vec("softenv:SoftSphereHaptic-v0", device={"batch_engine": "triton"}, **make)
+    env = gym.make_vec("softenv:SoftSphereHaptic-v0", **make)
+    assert type(env.unwrapped._device.laryngoscopes).__name__ == "LaryngoscopeWarpTensors"
