@@ -143,7 +143,7 @@ def halves_of(values: list[float]) -> list[tuple[float, float]]:
     return [(max(values[0:2]), max(values[3:5])), (max(values[5:7]), max(values[8:10]))]
 
 
-def soaked_over_fresh(env: Any, draw: Any, n_envs: int, block: int, rounds: int = 6) -> float:
+def soaked_over_fresh(env: Any, draw: Any, n_envs: int, block: int, rounds: int = 12) -> float:
     """The soaked env's speed over that of a fresh copy of it (deep-copied: rebuilt from its state, every
     object new), their blocks of ``block`` steps interleaved on the same actions and timed back to back in
     CPU time; the median of the rounds' ratios. What a long run leaves behind (a degraded spatial index, a
@@ -339,7 +339,7 @@ def main() -> None:
               "shared 2-core VM they vary +-20 % with nothing else running. Slowdown is judged against a fresh copy of "
               "the soaked env (deep-copied at the end: rebuilt from its state, every object new), stepped in blocks "
               "of a hundredth of the soak interleaved with the soaked env's on the same random actions, each pair "
-              "timed back to back in CPU time: the soaked env's speed over the copy's (median of 6 rounds), "
+              "timed back to back in CPU time: the soaked env's speed over the copy's (median of 12 rounds), "
               "over the same ratio taken before the soak (a deep copy runs a few per cent faster than the env it "
               "copies, soaked or not: SoftSphere-v0's ratio is about 0.93 after 1,000 steps). What a "
               "long run leaves behind (a degraded spatial index, a fragmented heap, a grown cache) slows the soaked "
