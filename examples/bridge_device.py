@@ -9,7 +9,7 @@ It sends the log's poses (relative to its first row; x, z, pitch, y) one control
 prints the forces the session renders back. ``--lockstep`` waits for each pose's answer before the
 next (a session run with ``realtime=False``); otherwise it paces itself by the log's clock, as a
 device streaming its pose would. A driver in another language sends the same 50-byte message
-(``softenv.training.bridge``'s table) and reads the same 42-byte answer.
+(``softenv.haptics.bridge``'s table) and reads the same 42-byte answer.
 """
 
 from __future__ import annotations
