@@ -13,10 +13,18 @@ import softenv  # noqa: F401  (registers the ids)
 RELATIVE_BOUND = 1e-6     # central differences at step 1e-6 in float64 agree to ~1e-8 of the gradient's scale
 
 
-def _rollout(env_id: str, actions: torch.Tensor, differentiable: bool, **scene) -> tuple[torch.Tensor, object]:
-    """Each step's reward ``(T, n)`` of ``actions`` ``(T, n, 4)`` from ``reset(seed=0)``, and the env."""
+DEVICES = [pytest.param("cpu"), pytest.param("cuda", marks=pytest.mark.skipif(not torch.cuda.is_available(),
+                                                                               reason="needs a CUDA device"))]
+
+
+def _rollout(env_id: str, actions: torch.Tensor, differentiable: bool, torch_device: str = "cpu",
+             **scene) -> tuple[torch.Tensor, object]:
+    """Each step's reward ``(T, n)`` of ``actions`` ``(T, n, 4)`` from ``reset(seed=0)``, and the env. The
+    laryngoscope runs on Warp either way (with gradients on it always does; on CUDA the plain step would
+    pick Triton, equal to Warp only to rounding)."""
     env = gym.make_vec(f"softenv:{env_id}", num_envs=actions.shape[1], vectorization_mode="vector_entry_point",
-                       backend="torch", differentiable=differentiable, **scene)
+                       backend="torch", differentiable=differentiable, torch_device=torch_device,
+                       device={"batch_engine": "warp"}, **scene)
     env.reset(seed=0)
     rewards = [env.step(a)[1] for a in actions]
     return torch.stack(rewards), env
@@ -36,13 +44,14 @@ CASES = {
 }
 
 
+@pytest.mark.parametrize("torch_device", DEVICES)
 @pytest.mark.parametrize("case", CASES, ids=list(CASES))
-def test_episode_gradients_match_central_differences(case):
+def test_episode_gradients_match_central_differences(case, torch_device):
     env_id, steps, press, scene = CASES[case]
-    a0 = _actions(steps, 2, 1, press)
-    plain, _ = _rollout(env_id, a0, False, **scene)
+    a0 = _actions(steps, 2, 1, press).to(torch_device)
+    plain, _ = _rollout(env_id, a0, False, torch_device, **scene)
     a = a0.clone().requires_grad_(True)
-    rewards, _ = _rollout(env_id, a, True, **scene)
+    rewards, _ = _rollout(env_id, a, True, torch_device, **scene)
     assert torch.equal(rewards.detach(), plain)                  # the same step, bit for bit
     rewards.sum().backward()
     assert a.grad.abs().sum() > 0
@@ -53,7 +62,8 @@ def test_episode_gradients_match_central_differences(case):
         up, down = a0.clone(), a0.clone()
         up[i] += 1e-6
         down[i] -= 1e-6
-        fd = (_rollout(env_id, up, False, **scene)[0].sum() - _rollout(env_id, down, False, **scene)[0].sum()) / 2e-6
+        fd = (_rollout(env_id, up, False, torch_device, **scene)[0].sum()
+              - _rollout(env_id, down, False, torch_device, **scene)[0].sum()) / 2e-6
         assert abs(a.grad[i].item() - fd.item()) <= RELATIVE_BOUND * scale + 1e-9, (i, a.grad[i].item(), fd.item())
 
 
