@@ -85,9 +85,11 @@ def test_the_graph_survives_an_autoreset_and_detach_cuts_it():
 
 
 def test_settings_it_cannot_differentiate_are_refused_by_name():
+    make = dict(num_envs=2, vectorization_mode="vector_entry_point", backend="torch")
     with pytest.raises(ValueError, match="differentiable=True steps eagerly: it takes neither compile_options"):
-        gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
-                     differentiable=True, target_draw="device", compile_options={})
+        gym.make_vec("softenv:SoftSphere-v0", differentiable=True, target_draw="device", compile_options={}, **make)
+    with pytest.raises(ValueError, match="differentiable='yes' must be True or False"):
+        gym.make_vec("softenv:SoftSphere-v0", differentiable="yes", **make)
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="Triton runs on CUDA only")

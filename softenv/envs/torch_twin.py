@@ -116,6 +116,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                              f"that makes CUDA graphs of its own (got compile_options={compile_options!r})")
         if obs_mode not in ("vector", "dict"):
             raise ValueError(f"obs_mode={obs_mode!r}: the torch backend has 'vector' and 'dict' observations")
+        if not isinstance(differentiable, bool):
+            raise ValueError(f"differentiable={differentiable!r} must be True or False")
         if differentiable and (compile_options is not None or cuda_graph):
             raise ValueError(f"differentiable=True steps eagerly: it takes neither compile_options={compile_options!r} "
                              f"nor cuda_graph={cuda_graph!r} (their state lives at fixed addresses, written in place)")
@@ -148,8 +150,11 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._rest_features = t(world.scene.rest_features)
         n, k = self.num_envs, world.k
         self._device = kind.tensors(world.scene, world.config, n, self.torch_device, dtype)
-        self.differentiable = bool(differentiable)
-        if self.differentiable:
+        self.differentiable = differentiable
+        if differentiable:
+            if not hasattr(self._device, "differentiable"):      # a kind written before the contract had it
+                raise ValueError(f"device.kind={world.config['device']['kind']!r} has no differentiable() (see "
+                                 "softenv.devices.base.DeviceTensors): its tensor form cannot carry gradients")
             self._device.differentiable()
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
