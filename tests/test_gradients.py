@@ -100,3 +100,10 @@ def test_the_triton_engine_is_refused_and_auto_runs_warp_with_gradients_on():
         gym.make_vec("softenv:SoftSphereHaptic-v0", device={"batch_engine": "triton"}, **make)
     env = gym.make_vec("softenv:SoftSphereHaptic-v0", **make)
     assert type(env.unwrapped._device.laryngoscopes).__name__ == "LaryngoscopeWarpTensors"
+
+
+def test_a_taped_period_holds_every_field_of_the_rollout_as_the_state_it_replaces():
+    from softenv.devices.laryngoscope.tensors import LaryngoscopeTensors
+    from softenv.devices.laryngoscope.warp_tensors import HELD_AS, ROLLOUT_FIELDS
+
+    assert list(HELD_AS) == list(ROLLOUT_FIELDS) and set(HELD_AS.values()) == set(LaryngoscopeTensors._STATE)

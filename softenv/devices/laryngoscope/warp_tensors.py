@@ -38,7 +38,7 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
             actions = torch.where(moving[:, None], actions, 0.0)
         if self.taped:
             period = differentiable_rollout(self, self._blade, self._hand, self._lateral, actions[None])
-            for name, field in zip(("_blade", "_hand", "_lateral", "_hand_v", "_contact", "_incisor"), ROLLOUT_FIELDS):
+            for field, name in HELD_AS.items():
                 setattr(self, name, period[field][0])
             self._forget()
             return
@@ -53,6 +53,9 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
 
 # what a differentiable rollout returns for each period, and each row's width
 ROLLOUT_FIELDS = {"blade": 6, "hand": 3, "lateral": 4, "hand_velocity": 4, "contact": 4, "incisor": 0}
+# the state tensor each field is held as (LaryngoscopeTensors._STATE)
+HELD_AS = {"blade": "_blade", "hand": "_hand", "lateral": "_lateral", "hand_velocity": "_hand_v", "contact": "_contact",
+           "incisor": "_incisor"}
 
 
 class _Rollout(torch.autograd.Function):
