@@ -181,8 +181,9 @@ class SoftSphereEnv(gym.Env):
     @classmethod
     def from_config(cls, config: SceneConfig, render_mode: str | None = None,
                     obs_mode: str = "vector") -> SoftSphereEnv:
-        """The env of a config already made (:func:`softenv.make_config`; checked here, not rebuilt): for
-        callers that made a scene once and derive envs from it (the trainee wing's replays)."""
+        """The env of a config already made (:func:`softenv.make_config`): its shape and values checked here,
+        not merged from the defaults again; for callers that made a scene once and derive envs from it (the
+        trainee wing's replays)."""
         env = cls.__new__(cls)
         env._build(validate_config(check_config(config)), render_mode, obs_mode)
         return env
