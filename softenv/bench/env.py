@@ -239,7 +239,7 @@ def ppo_first_run_row(quick: bool, n: int = 8) -> Row:
     training once, wall time, against CartPole-v1 in a fresh process of its own: in one process the
     second run would find torch's and PPO's first-call costs paid by the first. Runs alternate and repeat
     (medians), as the 2-core machines drift between runs."""
-    steps, pairs = (4096, 1) if quick else (16384, 3)
+    steps, pairs = (4096, 1) if quick else (16384, 5)
     rates: dict[str, list[float]] = {"haptic": [], "cartpole": []}
     for k in range(pairs):
         for name in (("cartpole", "haptic") if k % 2 == 0 else ("haptic", "cartpole")):
