@@ -147,6 +147,35 @@ def put(v: wp.vec2d, s: int, x: f64) -> wp.vec2d:
 
 
 @wp.func
+def root(x: f64) -> f64:
+    """``sqrt(x)``, whose adjoint is 0 at ``x = 0`` (:func:`adj_root`)."""
+    return wp.sqrt(x)
+
+
+@wp.func_grad(root)
+def adj_root(x: f64, adj_ret: f64):
+    # sqrt's slope is infinite at 0, and 0 times it (a zero impulse, no excess stiffness) would be NaN: the
+    # subgradient 0 there, as softenv._torch_ops.TorchOps.sqrt takes it on the tensor path
+    if x > ZERO:
+        wp.adjoint[x] += adj_ret * HALF / wp.sqrt(x)
+
+
+@wp.func
+def inverse(x: f64) -> f64:
+    """``1 / x``, whose adjoint forms nothing where no gradient flows back (:func:`adj_inverse`)."""
+    return ONE / x
+
+
+@wp.func_grad(inverse)
+def adj_inverse(x: f64, adj_ret: f64):
+    # Chipmunk's 1 / (d + CPFLOAT_MIN) is finite at d = 0 but its slope overflows: where the clamp after it
+    # saturated, 0 flows back, and 0 times that slope would be NaN
+    if adj_ret != ZERO:
+        r = ONE / x
+        wp.adjoint[x] -= adj_ret * r * r
+
+
+@wp.func
 def max0(x: f64) -> f64:
     if x > ZERO:
         return x
@@ -241,6 +270,11 @@ def separated(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, 
     return outside_an_edge(vw, nw, count, e0, e1, radius * (ONE + f64(1e-9)) + f64(1e-12))
 
 
+@wp.func_grad(separated)
+def adj_separated(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, radius: f64, adj_ret: bool):
+    pass        # a test: no gradient (and no replay of its loop, which Warp's adjoint does not follow)
+
+
 @wp.func
 def candidate(k: int, count: int) -> wp.vec4i:
     """Candidate edge ``k`` of the difference: (segment end, blade vertex) at its start and its end."""
@@ -303,11 +337,11 @@ class Collision:
 
 
 @wp.func
-def collide(p: Params, vw: Outline, nw: Outline) -> Collision:
-    """Chipmunk's ``SegmentToPoly`` for one blade: the nearest edge of the difference (GJK's while the
-    cores are apart, EPA's once they overlap), then its closest points, normal and contact points."""
-    count = p.vertices
-    e0, e1 = p.end0, p.end1
+def nearest_edge(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d) -> wp.vec4i:
+    """The difference's edge ``SegmentToPoly`` ends on, as (segment end, blade vertex) at its start and
+    its end, in the order its normal needs: the nearest of the candidates (GJK's) while the cores are apart,
+    the nearest edge of the hull (EPA's) once they overlap. A choice, so it has no gradient
+    (:func:`adj_nearest_edge`)."""
     # the cores overlap only where the bar's core meets the blade: both ends outside one of its edges (by a
     # margin far above rounding) rule that out without the hull's test
     inside = False
@@ -333,32 +367,61 @@ def collide(p: Params, vw: Outline, nw: Outline) -> Collision:
     flip = e_dy * best_px + -e_dx * best_py < ZERO
     if inside:
         flip = best_left == 1
-    i0, j0, i1, j1 = best[0], best[1], best[2], best[3]
     if flip:
-        i0, j0, i1, j1 = best[2], best[3], best[0], best[1]
-    m0 = minkowski(vw, e0, e1, i0, j0)
-    m1 = minkowski(vw, e0, e1, i1, j1)
+        return wp.vec4i(best[2], best[3], best[0], best[1])
+    return best
+
+
+@wp.func_grad(nearest_edge)
+def adj_nearest_edge(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, adj_ret: wp.vec4i):
+    # Warp's adjoint does not follow a loop it does not unroll, and its replay of this one (the running
+    # minimum starts at infinity) formed NaN: the edge is chosen, so nothing flows back
+    pass
+
+
+@wp.func
+def support_vertex(vw: Outline, count: int, bx: f64, by: f64) -> int:
+    """The first blade vertex furthest along ``(bx, by)`` (``SupportEdgeForPoly``'s); a choice, with no
+    gradient (:func:`adj_support_vertex`)."""
+    i1p, top = int(0), vw[0, 0] * bx + vw[0, 1] * by
+    for j in range(1, count):
+        s = vw[j, 0] * bx + vw[j, 1] * by
+        if s > top:                                      # the first of equals, as argmax
+            i1p, top = j, s
+    return i1p
+
+
+@wp.func_grad(support_vertex)
+def adj_support_vertex(vw: Outline, count: int, bx: f64, by: f64, adj_ret: int):
+    pass
+
+
+@wp.func
+def collide(p: Params, vw: Outline, nw: Outline) -> Collision:
+    """Chipmunk's ``SegmentToPoly`` for one blade: the nearest edge of the difference
+    (:func:`nearest_edge`), then its closest points, normal and contact points."""
+    count = p.vertices
+    e0, e1 = p.end0, p.end1
+    edge = nearest_edge(vw, nw, count, e0, e1)
+    m0 = minkowski(vw, e0, e1, edge[0], edge[1])
+    m1 = minkowski(vw, e0, e1, edge[2], edge[3])
     # ClosestPointsNew
     t = closest_t(m0[0], m0[1], m1[0], m1[1])
     q = lerp_t(m0[0], m0[1], m1[0], m1[1], t)
     rx, ry = m1[1] - m0[1], -(m1[0] - m0[0])
-    inv = ONE / (wp.sqrt(rx * rx + ry * ry) + TINY_)
+    inv = inverse(root(rx * rx + ry * ry) + TINY_)
     nx, ny = rx * inv, ry * inv
     d = nx * q[0] + ny * q[1]
     if not (d <= ZERO or (-ONE < t and t < ONE)):         # a vertex pair
-        d2 = wp.sqrt(q[0] * q[0] + q[1] * q[1])
-        inv = ONE / (d2 + TINY_)
+        d2 = root(q[0] * q[0] + q[1] * q[1])
+        inv = inverse(d2 + TINY_)
         nx, ny, d = q[0] * inv, q[1] * inv, d2
     # SupportEdgeForSegment(seg, n) and SupportEdgeForPoly(poly, -n)
     sa_i, sb_i = 1, 0
     if p.seg_normal[0] * nx + p.seg_normal[1] * ny > ZERO:
         sa_i, sb_i = 0, 1
     bx, by = -nx, -ny
-    i1p, top = int(0), vw[0, 0] * bx + vw[0, 1] * by
-    for j in range(1, count):
-        s = vw[j, 0] * bx + vw[j, 1] * by
-        if s > top:                                      # the first of equals, as argmax
-            i1p, top = j, s
+    i1p = support_vertex(vw, count, bx, by)
     i0p, i2p = (i1p - 1 + count) % count, (i1p + 1) % count
     n1, n2 = row(nw, i1p), row(nw, i2p)
     qa, qb = i1p, i2p
@@ -373,8 +436,8 @@ def collide(p: Params, vw: Outline, nw: Outline) -> Collision:
     qax, qay, qbx, qby = va[0], va[1], vb[0], vb[1]
     d1a, d1b = sax * ny - say * nx, sbx * ny - sby * nx
     d2a, d2b = qax * ny - qay * nx, qbx * ny - qby * nx
-    e1_denom = ONE / (d1b - d1a + TINY_)
-    e2_denom = ONE / (d2b - d2a + TINY_)
+    e1_denom = inverse(d1b - d1a + TINY_)
+    e2_denom = inverse(d2b - d2a + TINY_)
     out = Collision()
     out.nx = nx
     out.ny = ny
@@ -436,7 +499,7 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
     t = clip(-(ex_ * dx + ey_ * dy) / (dx * dx + dy * dy), ZERO, ONE)
     cx = ex_ + t * dx
     cy = ey_ + t * dy
-    dist = wp.sqrt(cx * cx + cy * cy) + f64(1e-300)
+    dist = root(cx * cx + cy * cy) + f64(1e-300)
     on_tongue = dist < p.R
     fx, fy, torque, P = f64(0.0), f64(0.0), f64(0.0), f64(0.0)
     if on_tongue:
@@ -455,7 +518,7 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         if ahead > slope:
             slope = ahead
         excess = max0(slope - p.k_ref)
-        stiff = excess * h + TWO * wp.sqrt(excess / inv_meff)
+        stiff = excess * h + TWO * root(excess / inv_meff)
         qx, qy = ca * p.grip[0] - sa * p.grip[1], sa * p.grip[0] + ca * p.grip[1]
         Fx = p.k * (gx - px - qx) + p.c * (hvx - vx + w * qy)
         Fy = p.k * (gy - py - qy) + p.c * (hvy - vy - w * qx)
@@ -542,7 +605,7 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         ax_, ay_ = anchor_s[0], anchor_s[1]
         r1x, r1y = cp * ax_ + -sp * ay_, sp * ax_ + cp * ay_
         sdx, sdy = (px + gqx) - (gx + r1x), (py + gqy) - (gy + r1y)
-        sdist = wp.sqrt(sdx * sdx + sdy * sdy)
+        sdist = root(sdx * sdx + sdy * sdy)
         inv = ONE / sdist
         nx, ny = sdx * inv, sdy * inv
         rcn = gqx * ny - gqy * nx
@@ -622,7 +685,7 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         for s in range(2):
             if ex[s] == 1:
                 tx, ty = tx + (anx * jn[s] - any_ * jt[s]), ty + (anx * jt[s] + any_ * jn[s])
-        impulse = impulse + wp.sqrt(tx * tx + ty * ty)
+        impulse = impulse + root(tx * tx + ty * ty)
     out = Device()
     out.px = px
     out.py = py
