@@ -67,6 +67,7 @@ class GradientPlanner(ReplayPolicy):
         self.scene = scene
         self.restarts, self.iterations, self.lr, self.sigma, self.seed = int(restarts), int(iterations), lr, sigma, seed
         self.history: list[float] = []        # the mean best error sum (mm x steps) before and after each iteration
+        self.elapsed: list[float] = []        # wall seconds since plan() began, at each entry of history
         self.decision_us = float("nan")       # planning wall time per decision of the plan
 
     def plan(self, warm_start: Any, episodes: int, seed: int | list[int] = 1000, **make: Any) -> np.ndarray:
@@ -88,7 +89,7 @@ class GradientPlanner(ReplayPolicy):
         env = self._env(n * k, horizon, make)
         rollout_seeds = [s for s in seeds for _ in range(k)]
         best_z, best_loss = z.detach().clone(), torch.full((n * k,), torch.inf, dtype=torch.float64)
-        self.history = []
+        self.history, self.elapsed = [], []
         for iteration in range(self.iterations + 1):
             env.reset(seed=rollout_seeds)
             loss = torch.zeros(n * k, dtype=torch.float64)
@@ -97,6 +98,7 @@ class GradientPlanner(ReplayPolicy):
             better = loss.detach() < best_loss
             best_z[better], best_loss[better] = z.detach()[better], loss.detach()[better]
             self.history.append(float(best_loss.view(n, k).min(dim=1).values.mean()))
+            self.elapsed.append(time.perf_counter() - started)
             if iteration == self.iterations:              # the last rollout only scores the last step's plans
                 break
             optimizer.zero_grad()

@@ -111,6 +111,7 @@ class TrajectoryOracle(ReplayPolicy):
         self.candidates, self.iterations, self.elites = candidates, iterations, elites
         self.knot_every, self.sigma, self.seed = knot_every, sigma, seed
         self.history: list[float] = []        # the mean best error sum after each iteration (mm x steps)
+        self.elapsed: list[float] = []        # wall seconds since plan() began, at each entry of history
         self.decision_us = float("nan")       # planning wall time per decision of the plan
 
     def plan(self, warm_start: Any, episodes: int, seed: int | list[int] = 1000, **make: Any) -> np.ndarray:
@@ -135,6 +136,7 @@ class TrajectoryOracle(ReplayPolicy):
         spread = np.full_like(mean, self.sigma)
         rollout_seeds = [episode for episode in seeds for _ in range(self.candidates)]
         self.history = [float(best_error.mean())]
+        self.elapsed = [time.perf_counter() - started]
         for _ in range(self.iterations):
             noise = np.stack([rng.standard_normal((self.candidates - 1, len(knots), 4)) for rng in rngs]) * spread[:, None]
             trial = np.concatenate([best[:, None], mean[:, None] + noise], axis=1)     # (n, K, M, 4)
@@ -151,6 +153,7 @@ class TrajectoryOracle(ReplayPolicy):
             mean = elite.mean(axis=1)
             spread = np.maximum(elite.std(axis=1), 0.02 * self.sigma)
             self.history.append(float(best_error.mean()))
+            self.elapsed.append(time.perf_counter() - started)
         self.actions = best_actions                  # the very actions whose rollouts scored best_error
         self.decision_us = (time.perf_counter() - started) / (n * horizon) * 1e6
         return best_error
