@@ -107,3 +107,51 @@ def test_a_taped_period_holds_every_field_of_the_rollout_as_the_state_it_replace
     from softenv.devices.laryngoscope.warp_tensors import HELD_AS, ROLLOUT_FIELDS
 
     assert list(HELD_AS) == list(ROLLOUT_FIELDS) and set(HELD_AS.values()) == set(LaryngoscopeTensors._STATE)
+
+
+STATE_CASES = {
+    "ideal, creep state": ("SoftSphereViscoelastic-v0", 20, 0.0, "z"),
+    "laryngoscope, blade pose": ("SoftSphereHaptic-v0", 30, 0.6, "device.blade"),
+    "laryngoscope, hand pose": ("SoftSphereHaptic-v0", 30, 0.6, "device.hand"),
+}
+
+
+@pytest.mark.parametrize("case", STATE_CASES, ids=list(STATE_CASES))
+def test_start_state_gradients_match_central_differences(case):
+    """``track_state()`` after ``reset()``: the episode's summed reward has gradients to the start state, which
+    agree with central differences of the start state moved in place (as track_state's docstring offers)."""
+    env_id, steps, press, name = STATE_CASES[case]
+    actions = _actions(steps, 2, 4, press)
+    env = gym.make_vec(f"softenv:{env_id}", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                       differentiable=True)
+
+    def episode(moved: tuple[tuple[int, int], float] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        env.reset(seed=0)
+        state = env.unwrapped.track_state()
+        if moved is not None:
+            with torch.no_grad():
+                state[name][moved[0]] += moved[1]
+        return torch.stack([env.step(a)[1] for a in actions]).sum(), state[name]
+
+    total, leaf = episode()
+    total.backward()
+    grad = leaf.grad.clone()
+    assert grad.abs().sum() > 0
+    scale = grad.abs().max().item()
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        i = (int(rng.integers(2)), int(rng.integers(grad.shape[1])))
+        with torch.no_grad():
+            fd = (episode((i, 1e-6))[0] - episode((i, -1e-6))[0]) / 2e-6
+        assert abs(grad[i].item() - fd.item()) <= RELATIVE_BOUND * scale + 1e-9, (i, grad[i].item(), fd.item())
+
+
+def test_track_state_refuses_a_plain_twin_and_a_twin_not_yet_reset():
+    plain = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch")
+    plain.reset(seed=0)
+    with pytest.raises(ValueError, match="track_state\\(\\) needs differentiable=True"):
+        plain.unwrapped.track_state()
+    fresh = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                         differentiable=True)
+    with pytest.raises(RuntimeError, match="call reset\\(\\) before track_state\\(\\)"):
+        fresh.unwrapped.track_state()

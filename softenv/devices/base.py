@@ -197,6 +197,11 @@ class DeviceTensors(DeviceNames, Protocol):
         """Cut autograd's graph at the device's current state (the twin's ``detach()``)."""
         ...
 
+    def track_state(self) -> dict[str, Any]:
+        """The twin's ``track_state()``: hold the device's state as new leaves of autograd's graph (after
+        :meth:`differentiable`) and return them by name; a device with no state returns ``{}``."""
+        ...
+
 
 @dataclass(frozen=True)
 class DeviceKind:

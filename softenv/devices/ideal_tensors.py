@@ -49,3 +49,7 @@ class IdealDeviceTensors:
 
     def detach(self) -> None:
         """No state of its own."""
+
+    def track_state(self) -> dict[str, torch.Tensor]:
+        """No state of its own."""
+        return {}

@@ -255,6 +255,22 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             setattr(self, name, getattr(self, name).detach())
         self._device.detach()
 
+    def track_state(self) -> dict[str, torch.Tensor]:
+        """Hold the current state as new leaves of autograd's graph (``differentiable=True``, after
+        ``reset()``) and return them: ``z`` (the tissue's creep state), ``prev_action`` (the last action,
+        which the action-change term reads) and the device's state as ``device.<name>``. A later loss's
+        ``backward()`` leaves its gradient with respect to the start state in their ``.grad``; changing
+        them in place under ``torch.no_grad()`` before stepping moves the start state (a finite difference)."""
+        if not self.differentiable:
+            raise ValueError("track_state() needs differentiable=True (make_vec(..., backend='torch', differentiable=True))")
+        if not self._started:
+            raise RuntimeError("call reset() before track_state(): there is no state to track")
+        self.detach()
+        self._z = self._z.clone().requires_grad_(True)
+        self._prev = self._prev.clone().requires_grad_(True)
+        device = self._device.track_state()
+        return {"z": self._z, "prev_action": self._prev, **{f"device.{name}": x for name, x in device.items()}}
+
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:

@@ -104,3 +104,6 @@ class LaryngoscopeTensorPart:
 
     def detach(self) -> None:
         self.laryngoscopes.detach()
+
+    def track_state(self) -> dict[str, torch.Tensor]:
+        return self.laryngoscopes.track_state()

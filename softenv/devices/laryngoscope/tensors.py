@@ -71,3 +71,14 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
         for name in self._STATE:
             setattr(self, name, getattr(self, name).detach())
         self._forget()
+
+    def track_state(self) -> dict[str, torch.Tensor]:
+        """Hold the state as new leaves of autograd's graph and return them by name (blade, hand, lateral,
+        contact, incisor, hand_v): a taped engine's later readings then have gradients to them."""
+        if not self.taped:
+            raise ValueError("track_state() needs the torch twin's differentiable=True: the plain engine writes its "
+                             "state in place, where autograd cannot follow it")
+        for name in self._STATE:
+            setattr(self, name, getattr(self, name).detach().clone().requires_grad_(True))
+        self._forget()
+        return {name.lstrip("_"): getattr(self, name) for name in self._STATE}
