@@ -103,6 +103,11 @@ class GradientPlanner(ReplayPolicy):
                 break
             optimizer.zero_grad()
             loss.sum().backward()
+            finite = torch.isfinite(torch.as_tensor(z.grad))
+            if not finite.all():                          # a gradient the simulator should not form: say where
+                row, step = (int(v) for v in torch.nonzero(~finite)[0, :2])
+                raise FloatingPointError(f"{self.scene}: the gradient of episode seed {rollout_seeds[row]} (restart "
+                                         f"{row % k}) is not finite at step {step} (iteration {iteration})")
             optimizer.step()
         env.close()
         plans = torch.tanh(best_z).numpy().astype(np.float32).reshape(n, k, horizon, 4)

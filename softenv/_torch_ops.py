@@ -37,7 +37,15 @@ class TorchOps:
     def exp(x: Any) -> Any:
         return torch.exp(x) if isinstance(x, torch.Tensor) else math.exp(x)      # a constant of the step: a float
     atan2 = staticmethod(torch.atan2)
-    asin = staticmethod(torch.asin)
+
+    @staticmethod
+    def asin(x: torch.Tensor) -> torch.Tensor:
+        """``torch.asin``, bit for bit; under autograd its gradient at +-1 (a lateral anchor clipped to the
+        tongue's edge, where torch's is 0 over 0: NaN) is 0, as the clip before it gives there."""
+        if not x.requires_grad:
+            return torch.asin(x)
+        inside = x.abs() < 1.0
+        return torch.where(inside, torch.asin(torch.where(inside, x, 0.0)), torch.asin(x.detach()))
 
     @staticmethod
     def positive(x: torch.Tensor) -> torch.Tensor:
