@@ -2,7 +2,7 @@
 
     python scripts/gradient_planner.py --out results/gradient-planner [--episodes 8] [--iterations 40]
 
-On each scene, the first ``--episodes`` test episodes are planned three ways, from the same warm start (the
+On each benchmark scene, the first ``--episodes`` test episodes are planned three ways, from the same warm start (the
 scripted expert on the laryngoscope, no force on the ideal device): by the gradient planner
 (softenv.baselines.gradient_planner: Adam on the action sequence through the differentiable torch twin,
 4 restarts), and by the benchmark's oracle (on the laryngoscope the CEM search the shipped anchors were
@@ -35,7 +35,7 @@ import torch  # noqa: E402
 
 from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.baselines.anchors import load_anchors, scene_config  # noqa: E402
-from softenv.baselines.evaluate import episode_seeds, evaluate  # noqa: E402
+from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate  # noqa: E402
 from softenv.baselines.gradient_planner import GradientPlanner  # noqa: E402
 from softenv.baselines.planner import TrajectoryOracle  # noqa: E402
 from softenv.baselines.policies import PlanningOracle, ZeroPolicy, make_baseline  # noqa: E402
@@ -44,7 +44,6 @@ from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 from softenv.stats import bootstrap_ci  # noqa: E402
 
-SCENES = ("SoftSphere-v0", "SoftSphereProcedure-v0", "SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0")
 TRAIN = {"task": {"split": "train"}}
 
 
@@ -76,7 +75,7 @@ def main() -> None:
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
+    parser.add_argument("--scenes", nargs="+", choices=list(SCENES), default=list(SCENES))
     parser.add_argument("--episodes", type=int, default=8)
     parser.add_argument("--iterations", type=int, default=40)
     parser.add_argument("--restarts", type=int, default=4)
@@ -87,8 +86,12 @@ def main() -> None:
     started = time.perf_counter()
     seeds = episode_seeds(args.episodes)
     results = []
-    fig, axes = plt.subplots(1, len(args.scenes), figsize=(4.2 * len(args.scenes), 3.6), layout="constrained")
-    for ax, scene in zip(np.atleast_1d(axes), args.scenes):
+    columns = min(3, len(args.scenes))
+    rows = -(-len(args.scenes) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(5.0 * columns, 3.8 * rows), layout="constrained", squeeze=False)
+    for ax in axes.flat[len(args.scenes):]:
+        ax.set_visible(False)
+    for ax, scene in zip(axes.flat, args.scenes):
         world = World(scene_config(scene))
         anchors = load_anchors(scene, seeds)
         lr, tried = pick_lr(scene, world, args.lrs, args.tune_iterations)
