@@ -54,6 +54,8 @@ class Plan:
 
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
+GRADIENT_PLANNER = "gradient"    # baselines/gradient_planner.py: a planner on request (--policies gradient), as costly as the oracle
+POLICIES = (*BASELINES, GRADIENT_PLANNER)
 OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's methods (torchrl: the offline extra)
 # gradient steps: what two cores afford for 36 learners in under an hour; TD3+BC's paper trains 1M, so its rows
 # here are short-budget ones (docs/datasets.md says so beside them)
@@ -103,8 +105,8 @@ def check_names(plan: Plan) -> None:
         if name not in SCENES:
             raise ValueError(f"unknown scene {name!r}; valid scenes: {list(SCENES)}")
     for name in plan.baselines:
-        if name not in BASELINES:
-            raise ValueError(f"unknown policy {name!r}; valid baselines: {list(BASELINES)}")
+        if name not in POLICIES:
+            raise ValueError(f"unknown policy {name!r}; valid baselines: {list(POLICIES)}")
     for name in plan.agents:
         if name not in AGENTS:
             raise ValueError(f"unknown agent {name!r}; valid agents: {list(AGENTS)}")
@@ -126,6 +128,7 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
                 out.append(Job(f"{scene} {algo} seed {seed}", fn,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes, *extra)))
     expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, offline_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+        or job.args[0] == GRADIENT_PLANNER \
         else 2  # noqa: E731
     return sorted(out, key=expected)
 
@@ -133,11 +136,18 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
 def baseline_job(name: str, scene: str, episodes: int, vectorization_mode: str = "vector_entry_point",
                  **make: Any) -> Episodes:
     """Evaluate one baseline on one scene's test targets (``evaluate``'s ``vectorization_mode`` and
-    scene ``make`` overrides passed on)."""
+    scene ``make`` overrides passed on). The gradient planner first plans those episodes from the
+    benchmark's warm start, its step size tuned on training targets (:func:`~.gradient_planner.tune_lr`)."""
     _, kwargs = scene_kwargs(scene)
     kwargs.pop("obs_mode")
-    return evaluate(make_baseline(name, World(make_config(**kwargs))), scene, episodes,
-                    vectorization_mode=vectorization_mode, **make)
+    world = World(make_config(**kwargs))
+    if name != GRADIENT_PLANNER:
+        return evaluate(make_baseline(name, world), scene, episodes, vectorization_mode=vectorization_mode, **make)
+    from .gradient_planner import GradientPlanner, planner_warm_start, tune_lr   # torch: only where this planner runs
+    warm = planner_warm_start(world)
+    planner = GradientPlanner(scene, lr=tune_lr(scene, warm)[0])
+    planner.plan(warm, episodes, **make)
+    return evaluate(planner, scene, episodes, vectorization_mode=vectorization_mode, **make)
 
 
 AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]

@@ -33,10 +33,15 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from softenv.envs.world import World
+
 from .evaluate import evaluate, scene_kwargs
 from .planner import RecordingPolicy, ReplayPolicy
+from .policies import ZeroPolicy, make_baseline
 
 EDGE = 0.999          # the warm start's actions held within +-EDGE before atanh (tanh reaches +-1 only at infinity)
+STEP_SIZES = (0.03, 0.1, 0.3)      # Adam's step sizes tune_lr() tries
+TRAIN = {"task": {"split": "train"}}
 
 
 class GradientPlanner(ReplayPolicy):
@@ -63,7 +68,7 @@ class GradientPlanner(ReplayPolicy):
             if not np.isfinite(size) or size <= 0:
                 raise ValueError(f"{name}={size!r}: must be a positive finite number")
         scene_kwargs(scene)                   # refuses an unknown scene by name
-        super().__init__(np.zeros((1, 1, 4)), "gradient planner")
+        super().__init__(np.zeros((1, 1, 4)), "gradient")
         self.scene = scene
         self.restarts, self.iterations, self.lr, self.sigma, self.seed = int(restarts), int(iterations), lr, sigma, seed
         self.history: list[float] = []        # the mean best error sum (mm x steps) before and after each iteration
@@ -127,3 +132,21 @@ class GradientPlanner(ReplayPolicy):
         kwargs["task"] = {**kwargs.get("task", {}), "horizon": horizon}
         return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", backend="torch",
                             differentiable=True, **kwargs)
+
+
+def tune_lr(scene: str, warm_start: Any, lrs: tuple[float, ...] = STEP_SIZES, iterations: int = 10,
+            seeds: tuple[int, ...] = (0, 1)) -> tuple[float, dict[str, float]]:
+    """Adam's step size for ``scene``: of ``lrs``, the one whose plans (2 restarts, ``iterations`` steps) of the
+    *training*-target episodes ``seeds`` end with the least mean summed shape error, never a test episode;
+    returns it and each step size's error."""
+    tried = {}
+    for lr in lrs:
+        planner = GradientPlanner(scene, restarts=2, iterations=iterations, lr=lr)
+        tried[f"{lr:g}"] = float(planner.plan(warm_start, len(seeds), list(seeds), **TRAIN).mean())
+    return float(min(tried, key=lambda key: tried[key])), tried
+
+
+def planner_warm_start(world: World) -> Any:
+    """The warm start the benchmark plans from: the scripted expert on the laryngoscope, no force on the
+    ideal device."""
+    return make_baseline("expert", world) if world.device_kind.name == "laryngoscope" else ZeroPolicy(world)

@@ -36,29 +36,13 @@ import torch  # noqa: E402
 from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.baselines.anchors import load_anchors, scene_config  # noqa: E402
 from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate  # noqa: E402
-from softenv.baselines.gradient_planner import GradientPlanner  # noqa: E402
+from softenv.baselines.gradient_planner import STEP_SIZES, GradientPlanner, planner_warm_start, tune_lr  # noqa: E402
 from softenv.baselines.planner import TrajectoryOracle  # noqa: E402
-from softenv.baselines.policies import PlanningOracle, ZeroPolicy, make_baseline  # noqa: E402
+from softenv.baselines.policies import PlanningOracle, make_baseline  # noqa: E402
 from softenv.bench import single_thread_environment, threads_pinned  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 from softenv.stats import bootstrap_ci  # noqa: E402
-
-TRAIN = {"task": {"split": "train"}}
-
-
-def warm_start(world: World) -> object:
-    return make_baseline("expert", world) if world.device_kind.name == "laryngoscope" else ZeroPolicy(world)
-
-
-def pick_lr(scene: str, world: World, lrs: list[float], iterations: int) -> tuple[float, dict[str, float]]:
-    """The step size whose plans of 2 training-target episodes end with the least summed error."""
-    tried = {}
-    for lr in lrs:
-        planner = GradientPlanner(scene, restarts=2, iterations=iterations, lr=lr)
-        tried[f"{lr:g}"] = float(planner.plan(warm_start(world), 2, [0, 1], **TRAIN).mean())
-    return float(min(tried, key=lambda k: tried[k])), tried
-
 
 def scores(error: np.ndarray, zero: np.ndarray, oracle: np.ndarray) -> np.ndarray:
     return 100.0 * (zero - error) / np.maximum(zero - oracle, 1e-12)
@@ -79,7 +63,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=8)
     parser.add_argument("--iterations", type=int, default=40)
     parser.add_argument("--restarts", type=int, default=4)
-    parser.add_argument("--lrs", type=float, nargs="+", default=[0.03, 0.1, 0.3])
+    parser.add_argument("--lrs", type=float, nargs="+", default=list(STEP_SIZES))
     parser.add_argument("--tune-iterations", type=int, default=10)
     args = parser.parse_args()
     command = "python scripts/gradient_planner.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
@@ -94,11 +78,11 @@ def main() -> None:
     for ax, scene in zip(axes.flat, args.scenes):
         world = World(scene_config(scene))
         anchors = load_anchors(scene, seeds)
-        lr, tried = pick_lr(scene, world, args.lrs, args.tune_iterations)
-        warm = evaluate(warm_start(world), scene, len(seeds), seeds).values["error_sum_mm"]
+        lr, tried = tune_lr(scene, planner_warm_start(world), tuple(args.lrs), args.tune_iterations)
+        warm = evaluate(planner_warm_start(world), scene, len(seeds), seeds).values["error_sum_mm"]
         planner = GradientPlanner(scene, restarts=args.restarts, iterations=args.iterations, lr=lr)
         t0 = time.perf_counter()
-        planned = planner.plan(warm_start(world), len(seeds), seeds)
+        planned = planner.plan(planner_warm_start(world), len(seeds), seeds)
         gradient_s = time.perf_counter() - t0
         row = {"scene": scene, "device": world.device_kind.name, "episodes": len(seeds), "lr": lr, "lr_tried": tried,
                "restarts": args.restarts, "iterations": args.iterations, "anchors": anchors.source,

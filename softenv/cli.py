@@ -468,8 +468,10 @@ def build_parser() -> argparse.ArgumentParser:
                               "where missing), 3 seeds each (report benchmark_offline.*; needs softenv[offline])")
     p.add_argument("--scenes", nargs="+", choices=list(benchmark.SCENES), metavar="SCENE",
                    help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
-    p.add_argument("--policies", nargs="*", choices=list(benchmark.BASELINES), metavar="POLICY",
-                   help=f"baseline policies: {', '.join(benchmark.BASELINES)} (default: all; none: no baselines)")
+    p.add_argument("--policies", nargs="*", choices=list(benchmark.POLICIES), metavar="POLICY",
+                   help=f"baseline policies: {', '.join(benchmark.BASELINES)} (default: all; none: no baselines); "
+                        f"{benchmark.GRADIENT_PLANNER!r} on request (Adam on each test episode's actions through the "
+                        "differentiable torch twin: minutes a laryngoscope scene)")
     p.add_argument("--agents", nargs="*", choices=list(benchmark.AGENTS), metavar="AGENT",
                    help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
                    "present; every scene) (default: quick and full: the four SB3 agents)")

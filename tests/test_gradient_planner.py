@@ -88,3 +88,17 @@ def test_the_planner_refuses_bad_settings():
             GradientPlanner(IDEAL, **kwargs)
     with pytest.raises(ValueError, match="unknown scene 'nowhere'"):
         GradientPlanner("nowhere")
+
+
+def test_compare_runs_the_gradient_planner_on_request(tmp_path):
+    """``softenv compare --policies gradient``: the planner's row beside the others, its step size tuned on
+    training targets, scored by the same anchors (above no force, below the exact oracle's 100)."""
+    from softenv.baselines.benchmark import Plan, run
+    from softenv.cli import main
+
+    plan = Plan(["SoftSphere-v0"], ["zero", "gradient"], [], {"SoftSphere-v0": 1}, episodes=2)
+    summaries = run(plan, tmp_path, tmp_path / "runs", "softenv compare --test", echo=lambda s: None)
+    scores = {s["policy"]: s["normalized_score"]["mean"] for s in summaries}
+    assert set(scores) == {"zero", "gradient"}
+    assert scores["zero"] < 1.0 < 50.0 < scores["gradient"] <= 100.0 + 1e-6
+    assert main(["compare", "--quick", "--policies", "gradient", "telepathy", "--agents", "--out", "/nonexistent"]) == 2
