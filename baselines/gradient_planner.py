@@ -137,8 +137,8 @@ class GradientPlanner(ReplayPolicy):
 def tune_lr(scene: str, warm_start: Any, lrs: tuple[float, ...] = STEP_SIZES, iterations: int = 10,
             seeds: tuple[int, ...] = (0, 1)) -> tuple[float, dict[str, float]]:
     """Adam's step size for ``scene``: of ``lrs``, the one whose plans (2 restarts, ``iterations`` steps) of the
-    *training*-target episodes ``seeds`` end with the least mean summed shape error, never a test episode;
-    returns it and each step size's error."""
+    *training*-target episodes ``seeds`` end with the least mean summed shape error, never a test episode (ties,
+    where none improves on the warm start, go to the first); returns it and each step size's error."""
     tried = {}
     for lr in lrs:
         planner = GradientPlanner(scene, restarts=2, iterations=iterations, lr=lr)

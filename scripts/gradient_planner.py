@@ -97,13 +97,13 @@ def main() -> None:
             t0 = time.perf_counter()
             searched = oracle.plan(make_baseline("expert", world), len(seeds), seeds)
             row["oracle_s_per_episode"] = (time.perf_counter() - t0) / len(seeds)
-            row["oracle_matches_anchors"] = bool(np.allclose(searched, anchors.oracle, rtol=1e-9))
+            row["oracle_rerun_rel_diff"] = float(np.max(np.abs(searched - anchors.oracle) / anchors.oracle))
             ax.plot(oracle.elapsed, oracle.history, "s-", ms=3, label="planning oracle (CEM, 16 x 30)")
         else:
             t0 = time.perf_counter()
             exact = evaluate(PlanningOracle(world), scene, len(seeds), seeds).values["error_sum_mm"]
             row["oracle_s_per_episode"] = (time.perf_counter() - t0) / len(seeds)
-            row["oracle_matches_anchors"] = bool(np.allclose(exact, anchors.oracle, rtol=1e-9))
+            row["oracle_rerun_rel_diff"] = float(np.max(np.abs(exact - anchors.oracle) / np.maximum(anchors.oracle, 1e-12)))
         ax.axhline(float(anchors.oracle.mean()), color="black", ls="--", lw=1, label="the oracle's error (score 100)")
         ax.axhline(float(warm.mean()), color="grey", ls=":", lw=1, label="warm start")
         ax.set_xlabel("planning wall time (s, all episodes)")
@@ -129,16 +129,17 @@ def report(results: list[dict], made: dict) -> str:
              f"Made by `{made['command']}` at {made['commit']} in {made['minutes']:.1f} min (one BLAS and torch "
              "thread, a 2-core machine). Normalized scores (0 no force, 100 the planning oracle), each episode scaled by "
              "the shipped anchors; mean with a 95 % bootstrap interval over the episodes. Adam's step size was picked "
-             "on 2 training-target episodes. The oracle's time is its search rerun here (its error sums equal the "
-             "shipped anchors' where the last column says so).", "",
+             "on 2 training-target episodes (ties, where no step size improved on the warm start there, go to the "
+             "smallest). The oracle's time is its search rerun here; the last column is the largest relative "
+             "difference between the rerun's error sums and the shipped anchors'.", "",
              "| scene | episodes | warm start | gradient planner | episodes above 100 | planner s/episode | "
-             "oracle s/episode | lr (tried: error) | oracle rerun = anchors |",
+             "oracle s/episode | lr (tried: error) | oracle rerun against anchors |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         tried = ", ".join(f"{k}: {v:.1f}" for k, v in r["lr_tried"].items())
         lines.append(f"| {r['scene']} | {r['episodes']} | {cell(r['warm_start'])} | {cell(r['gradient'])} | "
                      f"{r['above_oracle']} | {r['gradient_s_per_episode']:.2f} | {r['oracle_s_per_episode']:.3f} | "
-                     f"{r['lr']:g} ({tried}) | {'yes' if r['oracle_matches_anchors'] else 'no'} |")
+                     f"{r['lr']:g} ({tried}) | {r['oracle_rerun_rel_diff']:.1e} |")
     lines += ["", "![budget](budget.png)", ""]
     return "\n".join(lines)
 
