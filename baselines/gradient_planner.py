@@ -57,8 +57,6 @@ class GradientPlanner(ReplayPolicy):
         seed: the restarts' seed.
     """
 
-    VERSION = 1            # bump when the search changes
-
     def __init__(self, scene: str, restarts: int = 4, iterations: int = 40, lr: float = 0.05, sigma: float = 0.5,
                  seed: int = 0) -> None:
         for name, count, low in (("restarts", restarts, 1), ("iterations", iterations, 0)):
