@@ -47,13 +47,17 @@ def episode_seeds(episodes: int = EPISODES) -> list[int]:
     return [FIRST_SEED + i for i in range(episodes)]
 
 
-def scene_kwargs(scene: str, obs_mode: str = "vector", split: str = SPLIT) -> tuple[str, dict[str, Any]]:
-    """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets (or ``split``'s)."""
+def scene_kwargs(scene: str, obs_mode: str = "vector", split: str = SPLIT,
+                 make: dict[str, Any] | None = None) -> tuple[str, dict[str, Any]]:
+    """Env id and ``gym.make`` kwargs of a benchmark scene on its test targets (or ``split``'s), with
+    ``make``'s sections merged in key by key (``{"task": {"split": "train"}}``)."""
     if scene not in SCENES:
         raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
     env_id, overrides = SCENES[scene]
     kwargs = {**{**ENV_SCENES, **HAPTIC_SCENES}[env_id], **overrides}
     kwargs["task"] = {**kwargs.get("task", {}), "split": split}
+    for section, values in (make or {}).items():
+        kwargs[section] = {**kwargs.get(section, {}), **values}
     return env_id, {**kwargs, "obs_mode": obs_mode}
 
 
@@ -104,9 +108,7 @@ def evaluate(policy: Any, scene: str, episodes: int = EPISODES, seed: int | list
     ``make`` overrides scene sections (``device={"batch_engine": ...}``). A policy that plans offline
     reports its own ``decision_us``."""
     obs_mode = getattr(policy, "obs_mode", "vector")
-    env_id, kwargs = scene_kwargs(scene, obs_mode)
-    for section, values in make.items():
-        kwargs[section] = {**kwargs.get(section, {}), **values}
+    env_id, kwargs = scene_kwargs(scene, obs_mode, make=make)
     if vectorization_mode == "sync":
         venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="sync",
                             vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}, **kwargs)

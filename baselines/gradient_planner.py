@@ -36,7 +36,7 @@ import torch
 from softenv.envs.world import World
 
 from .evaluate import evaluate, scene_kwargs
-from .planner import RecordingPolicy, ReplayPolicy
+from .planner import ReplayPolicy, episode_list, warm_start_actions
 from .policies import ZeroPolicy, make_baseline
 
 EDGE = 0.999          # the warm start's actions held within +-EDGE before atanh (tanh reaches +-1 only at infinity)
@@ -78,11 +78,9 @@ class GradientPlanner(ReplayPolicy):
         ``warm_start``'s actions; returns each episode's summed shape error under its plan, as
         :func:`~.evaluate.evaluate` measures it. ``make`` overrides scene sections as evaluate's does."""
         started = time.perf_counter()
-        seeds = [seed + i for i in range(episodes)] if isinstance(seed, int) else [int(s) for s in seed]
+        seeds = episode_list(seed, episodes)
         n, k = len(seeds), self.restarts
-        recorder = RecordingPolicy(warm_start)
-        warm_error = evaluate(recorder, self.scene, n, seeds, **make).values["error_sum_mm"]
-        base = np.stack(recorder.actions, axis=1).astype(np.float64)                     # (n, H, 4)
+        warm_error, base = warm_start_actions(warm_start, self.scene, seeds, **make)       # base: (n, H, 4)
         horizon = base.shape[1]
         start = np.arctanh(np.clip(base, -EDGE, EDGE))
         noise = np.stack([np.random.default_rng([self.seed, s]).standard_normal((k, horizon, 4)) for s in seeds])
@@ -124,10 +122,8 @@ class GradientPlanner(ReplayPolicy):
 
     def _env(self, num_envs: int, horizon: int, make: dict[str, Any]) -> Any:
         """The scene's differentiable torch twin on its test targets, episodes of ``horizon`` steps."""
-        env_id, kwargs = scene_kwargs(self.scene)
-        for section, values in make.items():
-            kwargs[section] = {**kwargs.get(section, {}), **values}
-        kwargs["task"] = {**kwargs.get("task", {}), "horizon": horizon}
+        env_id, kwargs = scene_kwargs(self.scene, make=make)
+        kwargs["task"] = {**kwargs["task"], "horizon": horizon}
         return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", backend="torch",
                             differentiable=True, **kwargs)
 

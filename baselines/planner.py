@@ -80,6 +80,19 @@ class RecordingPolicy:
         return action
 
 
+def warm_start_actions(warm_start: Any, scene: str, seeds: list[int], **make: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``warm_start`` played on the episodes seeded ``seeds``: each episode's summed shape error and its
+    actions ``(n, H, 4)`` (float64), where a planner starts."""
+    recorder = RecordingPolicy(warm_start)
+    error = evaluate(recorder, scene, len(seeds), seeds, **make).values["error_sum_mm"]
+    return error, np.stack(recorder.actions, axis=1).astype(np.float64)
+
+
+def episode_list(seed: int | list[int], episodes: int) -> list[int]:
+    """The seeds of ``episodes`` episodes: ``seed, seed + 1, ...``, or ``seed`` itself when it is a list."""
+    return [seed + i for i in range(episodes)] if isinstance(seed, int) else [int(s) for s in seed]
+
+
 class TrajectoryOracle(ReplayPolicy):
     """The whole-episode CEM planner through the device (see the module docstring); after
     :meth:`plan` it replays its plans as a policy.
@@ -122,10 +135,8 @@ class TrajectoryOracle(ReplayPolicy):
         which episodes are planned beside it. ``make`` overrides scene sections as
         :func:`~softenv.baselines.evaluate.evaluate`'s does (``task={"split": "train"}``: the training targets)."""
         started = time.perf_counter()
-        seeds = [seed + i for i in range(episodes)] if isinstance(seed, int) else list(seed)
-        recorder = RecordingPolicy(warm_start)
-        best_error = evaluate(recorder, self.scene, episodes, seeds, **make).values["error_sum_mm"]
-        base = np.stack(recorder.actions, axis=1).astype(np.float64)        # (n, H, 4)
+        seeds = episode_list(seed, episodes)
+        best_error, base = warm_start_actions(warm_start, self.scene, seeds, **make)      # base: (n, H, 4)
         n, horizon = base.shape[:2]
         knots = np.arange(0, horizon + self.knot_every, self.knot_every)
         weights = _interpolation(horizon, knots)                            # (H, M)

@@ -35,7 +35,7 @@ import torch  # noqa: E402
 
 from softenv._artifact import save_figure, write_text  # noqa: E402
 from softenv.baselines.anchors import load_anchors, scene_config  # noqa: E402
-from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate  # noqa: E402
+from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate, normalized_scores  # noqa: E402
 from softenv.baselines.gradient_planner import STEP_SIZES, GradientPlanner, planner_warm_start, tune_lr  # noqa: E402
 from softenv.baselines.planner import TrajectoryOracle  # noqa: E402
 from softenv.baselines.policies import PlanningOracle, make_baseline  # noqa: E402
@@ -43,10 +43,6 @@ from softenv.bench import single_thread_environment, threads_pinned  # noqa: E40
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 from softenv.stats import bootstrap_ci  # noqa: E402
-
-def scores(error: np.ndarray, zero: np.ndarray, oracle: np.ndarray) -> np.ndarray:
-    return 100.0 * (zero - error) / np.maximum(zero - oracle, 1e-12)
-
 
 def summary(values: np.ndarray) -> dict[str, float]:
     mean, lo, hi = bootstrap_ci(values)
@@ -86,9 +82,9 @@ def main() -> None:
         gradient_s = time.perf_counter() - t0
         row = {"scene": scene, "device": world.device_kind.name, "episodes": len(seeds), "lr": lr, "lr_tried": tried,
                "restarts": args.restarts, "iterations": args.iterations, "anchors": anchors.source,
-               "warm_start": summary(scores(warm, anchors.zero, anchors.oracle)),
-               "gradient": summary(scores(planned, anchors.zero, anchors.oracle)),
-               "gradient_per_episode": scores(planned, anchors.zero, anchors.oracle).tolist(),
+               "warm_start": summary(normalized_scores(warm, anchors.zero, anchors.oracle)),
+               "gradient": summary(normalized_scores(planned, anchors.zero, anchors.oracle)),
+               "gradient_per_episode": normalized_scores(planned, anchors.zero, anchors.oracle).tolist(),
                "gradient_s_per_episode": gradient_s / len(seeds),
                "above_oracle": int((planned < anchors.oracle).sum())}
         ax.plot(planner.elapsed, planner.history, "o-", ms=3, label=f"gradient planner (Adam, lr {lr:g})")

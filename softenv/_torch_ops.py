@@ -10,10 +10,20 @@ is float32 in torch, float64 in numpy), cast to ``int64`` only to take.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
 import array_api_compat.torch as xp_torch
 import torch
+
+
+def _flat_at_ends(op: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor,
+                  inside: Callable[[torch.Tensor], torch.Tensor], safe: float) -> torch.Tensor:
+    """``op(x)`` bit for bit; under autograd its slope is 0 where ``inside(x)`` fails (the ends of ``op``'s
+    domain, where its own slope is infinite), the rows there evaluated at ``safe`` for the graph only."""
+    if not x.requires_grad:
+        return op(x)
+    keep = inside(x)
+    return torch.where(keep, op(torch.where(keep, x, safe)), op(x.detach()))
 
 
 class TorchOps:
@@ -28,10 +38,7 @@ class TorchOps:
     def sqrt(x: torch.Tensor) -> torch.Tensor:
         """``torch.sqrt``, bit for bit; under autograd its gradient at 0 (a force's size at no contact, where
         torch's is 0 times infinity: NaN) is 0, a subgradient of the norm it takes there."""
-        if not x.requires_grad:
-            return torch.sqrt(x)
-        positive = x > 0.0
-        return torch.where(positive, torch.sqrt(torch.where(positive, x, 1.0)), torch.sqrt(x.detach()))
+        return _flat_at_ends(torch.sqrt, x, lambda v: v > 0.0, 1.0)
 
     @staticmethod
     def exp(x: Any) -> Any:
@@ -42,10 +49,7 @@ class TorchOps:
     def asin(x: torch.Tensor) -> torch.Tensor:
         """``torch.asin``, bit for bit; under autograd its gradient at +-1 (a lateral anchor clipped to the
         tongue's edge, where torch's is 0 over 0: NaN) is 0, as the clip before it gives there."""
-        if not x.requires_grad:
-            return torch.asin(x)
-        inside = x.abs() < 1.0
-        return torch.where(inside, torch.asin(torch.where(inside, x, 0.0)), torch.asin(x.detach()))
+        return _flat_at_ends(torch.asin, x, lambda v: v.abs() < 1.0, 0.0)
 
     @staticmethod
     def positive(x: torch.Tensor) -> torch.Tensor:

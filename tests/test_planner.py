@@ -42,7 +42,7 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     planned = oracle.plan(expert, episodes=3)
     assert np.all(planned <= warm * (1 + 1e-9)) and planned.mean() < 0.97 * warm.mean()
     assert oracle.history[0] == pytest.approx(warm.mean()) and np.all(np.diff(oracle.history) <= 1e-9)
-    assert len(oracle.elapsed) == len(oracle.history) == 5 and np.all(np.diff(oracle.elapsed) >= 0)
+    assert len(oracle.elapsed) == len(oracle.history) == 5        # a wall time for each entry of the history
     measured = evaluate(oracle, SCENE, episodes=3)
     np.testing.assert_allclose(measured.values["error_sum_mm"], planned, rtol=1e-9)
     assert measured.decision_us == oracle.decision_us > 0       # the planner's own figure is carried, not re-timed
