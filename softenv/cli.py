@@ -22,11 +22,13 @@ from typing import Any, Callable, NoReturn
 import numpy as np
 
 from . import bench, leaderboard
+from .airway import GRADES
 from .baselines import benchmark
 from .baselines import minari_datasets
 from .baselines.minari_datasets import DATASET_SCENES, KINDS as DATASET_KINDS
 from .baselines.evaluate import EPISODES, SCENES
 from .datasets import ForceShapeData, paper_dataset, split_by_contact, split_rows
+from .envs import airway_scene
 from .evaluation import evaluate_policy
 from .parallel import Interrupted, Job, run_jobs, stop_on_signals, usable_cores
 from .response import REGRESSORS, MinMaxScaler, make_response
@@ -219,10 +221,12 @@ def cmd_datasets(args: argparse.Namespace) -> None:
 
 def cmd_score(args: argparse.Namespace) -> None:
     scene = None                      # the log's own scene (or, for a log that records none, the id's)
-    if args.scene is not None or args.law is not None:
-        scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"}}
+    if args.scene is not None or args.law is not None or args.grade is not None:
+        scene = {"dynamics": {"kind": args.scene or "quasi_static"}, "tissue": {"law": args.law or "linear"},
+                 **(airway_scene(args.grade) if args.grade is not None else {})}
     path = example_log(args.example) if args.example else Path(args.trajectory)
-    typed = " ".join(f"--{name} {value}" for name, value in (("scene", args.scene), ("law", args.law)) if value)
+    typed = " ".join(f"--{name} {value}" for name, value in (("scene", args.scene), ("law", args.law),
+                                                             ("grade", args.grade)) if value)
     store = open_store(args)                # before the replay: a bad --store or --trainee is refused first
     report = score_file(path, scene, args.out, scene_named=typed or None)
     m = report["metrics"]
@@ -377,7 +381,8 @@ def cmd_play(args: argparse.Namespace) -> None:
     elif args.device != "keys":
         device = play.open_haptic_device(args.device)
     try:
-        session = play.run(args.seconds, args.out, bridge=bridge, device=device, screens=not args.headless)
+        scene = airway_scene(args.grade) if args.grade is not None else None
+        session = play.run(args.seconds, args.out, scene, bridge=bridge, device=device, screens=not args.headless)
         if store is not None:
             keep_session(store, session.log_path, args.trainee, "play")
     finally:
@@ -512,6 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=_bounded(float, 0.0, MAX_DURATION_S, low_open=True), default=10.0,
                    help=f"session length in s (0-{MAX_DURATION_S:g}, the longest log that can be scored; default 10)")
     p.add_argument("--out", default="play", help="where the device log and its score report go (default: play)")
+    grade_arg(p, "the session's airway")
     p.add_argument("--headless", action="store_true",
                    help="no window (SDL's dummy driver) and no start or end screen: the session starts at once and "
                         "ends with its score (a bridge-driven or smoke run)")
@@ -562,6 +568,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--law", choices=["linear", "stiffening"],
                    help="tissue law of the replay: linear or stiffening (as --scene: the log's own if it records "
                         "one; else linear unless given)")
+    grade_arg(p, "the replay's airway (as --scene: the log's own if it records one)")
     p.add_argument("--out", help="write <name>_score.json, .md and .png here")
     store_args(p)
 
@@ -577,6 +584,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--token", help="the token every request must carry (default: none on a loopback address, a "
                    "random one printed at start on any other)")
     return parser
+
+
+def grade_arg(p: argparse.ArgumentParser, what: str) -> None:
+    """--grade: an airway grade of SoftSphereAirway-v0 (softenv.airway)."""
+    p.add_argument("--grade", type=int, choices=list(GRADES), help=f"{what}: a difficult-airway grade, "
+                   + ", ".join(f"{g} {name}" for g, (name, *_) in GRADES.items())
+                   + " (SoftSphereAirway-v0's device range; default: SoftSphereHaptic-v0's normal airway)")
 
 
 def store_args(p: argparse.ArgumentParser) -> None:

@@ -82,6 +82,15 @@ class RewardSection(TypedDict):
     incisor_weight: float
 
 
+class AirwaySection(TypedDict):
+    grade: int                          # 1-4 (softenv.airway.GRADES)
+    mouth_opening: float | None         # mm (None: the grade's)
+    neck_extension: float | None        # rad
+    larynx_depth: float | None          # deg
+    larynx_lift: float | None
+    tongue_stiffness: float | None
+
+
 class RenderSection(TypedDict):
     size: int                           # px
     fps: int                            # 1/s
@@ -98,4 +107,5 @@ class SceneConfig(TypedDict):
     dynamics: DynamicsSection
     task: TaskSection
     reward: RewardSection
+    airway: AirwaySection
     render: RenderSection

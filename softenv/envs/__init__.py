@@ -29,6 +29,17 @@ HAPTIC_SCENES: dict[str, dict[str, Any]] = {
     "SoftSphereHaptic-v0": {**_HAPTIC, "task": {"horizon": 250}},
     "SoftSphereHapticProcedure-v0": {**_HAPTIC, "task": {"kind": "procedure", "horizon": 500}},
 }
+# graded airways (softenv.airway; pass airway={"grade": g}): one device range for every grade, so that agents
+# trained on one grade are evaluated on another in the same spaces. 60 N: the hardest grade's targets need up
+# to 57.5 N (Bucx et al. 1995, manikin: the groups' peak tongue forces 60.5-74.2 N); 15 N: its 11.5 N sideways
+AIRWAY_DEVICE = {"max_normal_force": 60.0, "max_sideways_force": 15.0}
+HAPTIC_SCENES["SoftSphereAirway-v0"] = {**_HAPTIC, "device": {"kind": "laryngoscope", **AIRWAY_DEVICE},
+                                        "task": {"horizon": 250}}
+
+
+def airway_scene(grade: int) -> dict[str, Any]:
+    """SoftSphereAirway-v0 at ``grade``, as sections over SoftSphereHaptic-v0's scene (what a hand log records)."""
+    return {"device": dict(AIRWAY_DEVICE), "airway": {"grade": grade}}
 
 
 def register_envs() -> None:
@@ -43,5 +54,5 @@ def register_envs() -> None:
                      vector_entry_point="softenv.envs.make:make_vector_env", kwargs={"base_scene": scene})
 
 
-__all__ = ["ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "default_config", "describe_config", "make_config",
+__all__ = ["AIRWAY_DEVICE", "ENV_SCENES", "NumpyInfo", "HAPTIC_SCENES", "airway_scene", "default_config", "describe_config", "make_config",
            "register_envs"]

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from typing import Any, Callable, cast
 
 from .._validation import check_choice, check_int, check_real
+from ..airway import GRADES, SETTINGS, airway, target_ranges
 from ..devices.base import device_kind
 from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES, RETIRED_ENGINES
 from ..fem.params import FE_POISSON
@@ -211,6 +212,23 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "incisor_weight": Field(1.0, "", ">= 0", _real(0, None),
                                 "weight of -(incisor force) / safe_force (laryngoscope; any force is an error)"),
     },
+    "airway": {
+        "grade": Field(1, "", "1-4", _choice(*GRADES),
+                       "difficult-airway grade: 1 normal, 2 restricted neck extension, 3 restricted mouth opening, 4 "
+                       "both (docs: airways); the settings below left at None take the grade's values"),
+        "mouth_opening": Field(None, "mm", "[0, 20] | None", _optional(_real(0, 20)),
+                               "the upper incisal edge's clearance above the blade's flange in the start pose "
+                               "(grade 1: 3)"),
+        "neck_extension": Field(None, "rad", "[0.1, 0.5] | None", _optional(_real(0.1, 0.5)),
+                                "largest blade pitch the hand may give, either way (grade 1: 0.5)"),
+        "larynx_depth": Field(None, "deg", "[-20, 20] | None", _optional(_real(-20, 20)),
+                              "added to task.target_insertion_deg: how far back the view lies (grade 1: 0)"),
+        "larynx_lift": Field(None, "", "[0.5, 2] | None", _optional(_real(0.5, 2)),
+                             "multiplies task.target_normal_force: how much lift the view needs (grade 1: 1)"),
+        "tongue_stiffness": Field(None, "", "[0.5, 2] | None", _optional(_real(0.5, 2)),
+                                  "multiplies tissue.E and the target forces: the normal tongue's target shapes, "
+                                  "each needing that much more force (grade 1: 1)"),
+    },
     "render": {
         "size": Field(320, "px", "64-2048", _int(64, 2048), "frame width and height"),
         "fps": Field(20, "1/s", "1-240", _int(1, 240), "frames per second in human mode"),
@@ -292,7 +310,7 @@ def validate_config(config: Mapping[str, Any]) -> SceneConfig:
                          f"[{t['radius'] / 1000:g}, {t['radius']:g}] m (tissue.radius={t['radius']:g} m)")
     # the design force's indentation over the radius (linear law): below ~1e-9 the deformations drown in the
     # rounding of the surface coordinates and the shape model has nothing to fit
-    E, nu = material(t)
+    E, nu = scene_material(out)
     design = 2 * (1 - nu ** 2) * dev["max_normal_force"] / (math.pi * t["patch_radius"] * E * t["radius"])
     if design < MIN_DESIGN_INDENTATION:
         raise ValueError(f"device.max_normal_force={dev['max_normal_force']:g} N on tissue.E={E:g} Pa indents the "
@@ -312,18 +330,26 @@ def validate_config(config: Mapping[str, Any]) -> SceneConfig:
     checks = [("target_insertion_deg", dev["insertion_deg"]), ("target_lateral_deg", (-dev["lateral_deg"], dev["lateral_deg"])),
               ("target_normal_force", (0.0, dev["max_normal_force"])),
               ("target_sideways_force", (-dev["max_sideways_force"], dev["max_sideways_force"]))]
+    ranges = target_ranges(task, out["airway"])
     for key, (lo, hi) in checks:
-        a, b = task[key]
+        a, b = ranges[key]
         if a < lo or b > hi:
-            raise ValueError(f"task.{key}={task[key]!r} must lie within the device range [{lo:g}, {hi:g}]")
+            on = "" if ranges[key] == task[key] else f" (on airway grade {out['airway']['grade']}: {(a, b)!r})"
+            raise ValueError(f"task.{key}={task[key]!r}{on} must lie within the device range [{lo:g}, {hi:g}]")
     return cast(SceneConfig, out)
 
 
-def material(tissue: Mapping[str, Any]) -> tuple[float, float]:
+def material(tissue: Mapping[str, Any], stiffness: float = 1.0) -> tuple[float, float]:
     """``(E, nu)`` of a tissue section, its model's defaults where they are None: nu 0.45 (analytic) or
-    0.49 (fem: nearly incompressible), E such that 40 N indents 40 % of the default radius at that nu."""
+    0.49 (fem: nearly incompressible), E such that 40 N indents 40 % of the default radius at that nu; E
+    times ``stiffness`` (an airway's tongue stiffness)."""
     nu = tissue["nu"] if tissue["nu"] is not None else (FE_POISSON if tissue["model"] == "fem" else TONGUE_POISSON)
-    return (tissue["E"] if tissue["E"] is not None else effective_modulus(nu=nu)), nu
+    return (tissue["E"] if tissue["E"] is not None else effective_modulus(nu=nu)) * stiffness, nu
+
+
+def scene_material(config: Mapping[str, Any]) -> tuple[float, float]:
+    """``(E, nu)`` of a scene's tongue: its tissue's on its airway."""
+    return material(config["tissue"], airway(config["airway"]).tongue_stiffness)
 
 
 def _check_fem(config: SceneConfig) -> None:
@@ -332,7 +358,7 @@ def _check_fem(config: SceneConfig) -> None:
     if t["law"] != "linear":
         raise ValueError(f"tissue.law={t['law']!r} applies to tissue.model='analytic' only; the FE tongue is "
                          "neo-Hookean (its nonlinearity is its own): leave tissue.law at 'linear'")
-    E, nu = material(t)
+    E, nu = scene_material(config)
     check_real(E, "tissue.E (fem model)", 1.0, 1e9)
     check_real(nu, "tissue.nu (fem model)", 0.0, 0.4999)
     if n_loads % RAMP_STEPS:
@@ -361,7 +387,9 @@ FE_KEYS = ("model", "fe_cells")     # tissue keys of the fem model (left out of 
 def config_key(config: Mapping[str, Any], sections: tuple[str, ...]) -> str:
     """A stable text key of some sections (for caches and saved agents). An analytic tissue is keyed
     as before the fem model existed (resolved E and nu, no FE keys), and a device batched by an exact
-    engine as before ``device.batch_engine`` existed, so caches and agents made then stay valid."""
+    engine as before ``device.batch_engine`` existed, so caches and agents made then stay valid. The
+    airway bears on the tissue, the device and the task: its resolved settings are keyed with any of
+    them, unless they are the normal airway's (keyed as before airways existed)."""
     keyed = dict(config)
     device = config.get("device")
     if device is not None and device.get("batch_engine") in EXACT_ENGINES:
@@ -371,5 +399,11 @@ def config_key(config: Mapping[str, Any], sections: tuple[str, ...]) -> str:
     if t is not None and t["model"] == "analytic":
         E, nu = material(t)
         keyed["tissue"] = {**{k: v for k, v in t.items() if k not in FE_KEYS}, "E": E, "nu": nu}
-    return repr([(s, sorted(keyed[s].items())) for s in sections])
+    keys = [(s, sorted(keyed[s].items())) for s in sections]
+    section = config.get("airway")
+    if section is not None and set(sections) & {"tissue", "device", "task"}:
+        settings = airway(section)
+        if not settings.is_normal:
+            keys.append(("airway", list(zip(SETTINGS, settings.settings))))
+    return repr(keys)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
 
@@ -30,7 +30,8 @@ from ..geometry import SphereMesh, make_mesh
 from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedResponse, make_response, tabulate
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
-from .config import config_key, material
+from ..airway import tongue_only
+from .config import config_key, material, scene_material
 from ..sections import SceneConfig
 
 _SCENES: dict[str, "Scene"] = {}
@@ -121,7 +122,7 @@ def fe_request(config: SceneConfig) -> FERequest:
     """What a tissue.model="fem" scene's FE data are computed from: the tissue section's material and
     geometry on ``fe_cells``, the scene's surface mesh and device box, its workspace sampling."""
     t, sm_cfg = config["tissue"], config["shape_model"]
-    E, nu = material(t)
+    E, nu = scene_material(config)
     params = FEParams(radius=t["radius"], E=E, nu=nu, patch_radius=t["patch_radius"], cells_per_side=t["fe_cells"])
     mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], t["radius"])
     workspace = device_workspace(config)
@@ -131,14 +132,15 @@ def fe_request(config: SceneConfig) -> FERequest:
 
 def build_scene(config: SceneConfig, progress: bool = False) -> Scene:
     """The scene for a validated config (memoised per process, files cached on disk)."""
-    # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not)
+    # the device enters the scene only through its force-feature box (the laryngoscope's dynamics do not),
+    # the airway only through the tongue's stiffness
     t = config["tissue"]
     device: Mapping[str, Any] = config["device"]
-    box = {"device": {k: device[k] for k in DEVICE_BOX_KEYS}}
+    box = {"device": {k: device[k] for k in DEVICE_BOX_KEYS}, "airway": tongue_only(config["airway"])}
     key = config_key({**config, **box}, ("tissue", "mesh", "shape_model", "response", "device"))
     if key in _SCENES:
         return _SCENES[key]
-    E, nu = material(t)
+    E, nu = scene_material(config)
     tissue = TissueParams(law=t["law"], E=E, nu=nu, radius=t["radius"], patch_radius=t["patch_radius"])
     mesh = make_mesh(config["mesh"]["kind"], config["mesh"]["resolution"], tissue.radius)
     layout = DorsumLayout(tissue.radius)
@@ -150,7 +152,18 @@ def build_scene(config: SceneConfig, progress: bool = False) -> Scene:
     memo = key
     if fe is not None:      # fits cached from FE data are keyed by those data's bits, not only by their request
         key += hashlib.sha256(data.forces.tobytes() + data.shapes.tobytes()).hexdigest()
-    shape_model = _cache.cached("shape-model", {"data": key}, lambda: ShapeModel(sm_cfg["n_components"]).fit(data.shapes, mesh),
+    # an analytic tongue of any stiffness shares the normal tongue's shape model, so a target shape has the
+    # same b on every airway grade (the linear tongue's deformations only scale with it: the same span)
+    normal = fe is None and tissue.E != material(t)[0]
+    shapes_key = config_key({**config, **box, "airway": tongue_only({**config["airway"], "tongue_stiffness": 1.0})},
+                            ("tissue", "mesh", "shape_model", "response", "device")) if normal else key
+
+    def fit() -> ShapeModel:
+        shapes = workspace_dataset(workspace, layout, mesh, replace(tissue, E=material(t)[0]), n_contacts=sm_cfg["n_contacts"],
+                                   n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"]).shapes if normal else data.shapes
+        return ShapeModel(sm_cfg["n_components"]).fit(shapes, mesh)
+
+    shape_model = _cache.cached("shape-model", {"data": shapes_key}, fit,
                                 lambda p: ShapeModel.load(p, mesh=mesh), lambda m, p: m.save(p))
     name = config["response"]["model"]
     if name == "exact":

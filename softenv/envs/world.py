@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .._validation import real_array
+from ..airway import target_ranges
 from ..response import TabulatedResponse
 from ..response.exact import TableWork
 from ..devices.base import DeviceKind, device_kind
@@ -75,8 +76,7 @@ class World:
         self._device_end = 2 * self.k + self.device_obs_size
         self.dynamics = Dynamics(**config["dynamics"])
         task = config["task"]
-        ranges = [task[key] for key in ("target_insertion_deg", "target_lateral_deg", "target_normal_force",
-                                        "target_sideways_force")]
+        ranges = list(target_ranges(task, config["airway"]).values())
         low, high = (degrees_to_features([r[i] for r in ranges], config["tissue"]["radius"]) for i in (0, 1))
         self.family = TargetFamily(low, high, task["split"])
         self.task_kind = task["kind"]

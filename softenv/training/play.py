@@ -7,7 +7,8 @@ The window is pygame's (SDL): a real event loop at the control rate, keyboard, m
 at 20-30 frames per second and need a GUI toolkit, too slow for a 50 Hz device.
 
 A session: a start screen states the task and the controls (:data:`softenv.training.inputs.CONTROLS`)
-and waits for Space, Enter or a click; then SoftSphereHaptic-v0's scene runs toward the family-centre
+and waits for Space, Enter or a click; then the scene (SoftSphereHaptic-v0's, or an airway grade's: the
+title names it) runs toward the family-centre
 target (the one trainee scoring uses) for ``seconds``, one frame per control period
 (:mod:`softenv.training.play_view`), Space or P pausing it and Esc ending it early; the hand's pose is
 recorded every control period as a device log (:data:`softenv.training.logs.HAND_LOG`), written, and
@@ -28,6 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..airway import scene_title
 from ..envs.config import scene_sections
 from ..haptics.arms import BACKENDS
 from ..haptics.bridge import LOOPBACK, BridgeServer
@@ -101,7 +103,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
 
     try:
         screen = pygame.display.set_mode(SIZE)
-        pygame.display.set_caption("softenv play: SoftSphereHaptic-v0")
+        pygame.display.set_caption(f"softenv play: {scene_title(config['airway'])}")
         view = PlayView(pygame, screen, env, INCISOR_LIMIT_N)
         hand = device if device is not None else (
             BridgeInput(bridge, 0.0 if realtime else 1.0) if bridge is not None else PygameInput(pygame))
@@ -143,7 +145,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
         log = np.column_stack([np.arange(len(poses)) * dt, np.array(poses)])
         out = Path(out_dir)
         path = out / f"session_{time.strftime('%Y%m%d-%H%M%S')}.csv"
-        save_log(log, path, HAND_LOG, note=f"softenv play, SoftSphereHaptic-v0, {len(poses) - 1} steps of {dt:g} s, "
+        save_log(log, path, HAND_LOG, note=f"softenv play, {scene_title(config['airway'])}, {len(poses) - 1} steps of {dt:g} s, "
                  f"driven by {hand.describe()}", scene=scene)
         live = env.device.clinical_summary(env.b)
         _, logged = read_log(path, HAND_LOG)         # scored as written (9 digits), as `softenv score` of the file is

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..airway import scene_title
 from ..devices.laryngoscope import clinical
 from ..projection import View, capsule, shaded_faces, visible_edges
 from .inputs import CONTROLS
@@ -63,7 +64,7 @@ def ramp(x: np.ndarray) -> np.ndarray:
 
 
 class PlayView:
-    """Draws a session of ``env`` (SoftSphereHaptic-v0) on ``screen``; ``incisor_limit_N``: the score's
+    """Draws a session of ``env`` (SoftSphereHaptic-v0, or an airway grade: its title names it) on ``screen``; ``incisor_limit_N``: the score's
     limit on the force on the incisors."""
 
     def __init__(self, pygame: Any, screen: Any, env: Any, incisor_limit_N: float) -> None:
@@ -154,7 +155,7 @@ class PlayView:
         step's, empty before the first)."""
         self.drawn = {}
         self.screen.fill(PAPER)
-        self._text("softenv play: SoftSphereHaptic-v0", (12, 12), 26)
+        self._text(f"softenv play: {scene_title(env.world.config['airway'])}", (12, 12), 26)
         vertices = env.world.vertices(env.b).reshape(-1, 3)
         device = env.device.drawing()
         view_pct = self._side_view(vertices, device)

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..airway import airway, scene_title, target_ranges
 from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
@@ -226,8 +227,7 @@ def expert_trajectory(config: SceneConfig | None = None, duration_s: float = 5.0
     check_choice(style, "style", ("expert", "too_forceful", "wrong_direction"))
     config = force_config(config)
     task, dev = config["task"], config["device"]
-    target = np.array([np.mean(task["target_insertion_deg"]), np.mean(task["target_lateral_deg"]),
-                       np.mean(task["target_normal_force"]), np.mean(task["target_sideways_force"])])
+    target = np.array([np.mean(r) for r in target_ranges(task, config["airway"]).values()])
     start_insertion = dev["insertion_deg"][0]
     if style == "wrong_direction":
         target = np.array([start_insertion + 0.3 * (target[0] - start_insertion), -target[1] - 8.0, target[2],
@@ -348,7 +348,9 @@ def score_log(table: np.ndarray, schema: Schema, config: SceneConfig, path: str 
         trainee, expert = replay(table, config), replay(expert_trajectory(config), config)
         parts, expert_parts = score(trainee, expert, safe_force), score(expert, expert, safe_force)
         formula, weights = FORMULA, WEIGHTS
-    report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": sections, "scene_from": scene_from, **parts,
+    patient = airway(config["airway"])
+    report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": sections, "scene_from": scene_from,
+              "airway": {"grade": patient.grade, "name": patient.name, "title": scene_title(config["airway"])}, **parts,
               "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,
               "points_to_gain": points_to_gain(parts, expert_parts, weights),
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
@@ -396,7 +398,8 @@ def _markdown(report: dict[str, Any]) -> str:
                  ("duration", f"{mc['duration_s']:.2f} s", f"{ec['duration_s']:.2f} s")]
     lines = [f"# Trainee score: {report['score']:.1f} / 100\n", f"Trajectory `{report['trajectory']}` "
              f"({report['log']}), replayed on scene sections `{json.dumps(report['scene'])}` "
-             f"(from {report['scene_from']}).\n", "| metric | trainee | expert |", "|---|---|---|",
+             f"(from {report['scene_from']}): {report['airway']['title']}; the expert's reference is on the same "
+             "airway.\n", "| metric | trainee | expert |", "|---|---|---|",
              *[f"| {a} | {b} | {c} |" for a, b, c in rows], "",
              "| part | weight | trainee | expert | points to gain |", "|---|---|---|---|---|",
              *[f"| {k} | {w:g} | {report[k]:.3f} | {report['expert_parts'][k]:.3f} | {report['points_to_gain'][k]:.1f} |"

@@ -14,8 +14,11 @@ own (:mod:`.physics`).
   to the common centre by the parallel-axis theorem).
 * **Hand** at the grip, moved by velocity within a box (it stops at the walls).
 * **Upper incisors**: a rounded bar (radius 4 mm) at the mouth, 3 cm in from the heel, its incisal
-  edge 3 mm above the flange in the start pose, rising 3 cm up and back along the tooth and the
-  maxilla (so the blade cannot slip up past it).
+  edge ``incisor_clearance`` above the flange in the start pose (the airway's mouth opening: 3 mm on
+  the normal airway), rising 3 cm up and back along the tooth and the maxilla (so the blade cannot
+  slip up past it).
+* **Neck extension**: the hand may pitch the blade at most ``pitch_limit`` either way (0.5 rad on
+  the normal airway; :mod:`softenv.airway`).
 
 Time stepping. The physics substep is ``h = dt / n`` with ``n`` the smallest count that keeps
 ``h <= max_substep`` (1 ms: a 1 kHz haptic rate) and ``omega_max h <= 0.3`` (accuracy; explicit
@@ -34,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ...airway import airway
 from ..contact import TongueContact
 from ..haptic_presets import PRESETS, HapticPreset
 from ...sections import SceneConfig
@@ -42,13 +46,11 @@ SPRING_LENGTH = 1.0           # m, rest length of the two coupling springs
 START_GAP = 0.005             # m between the blade's underside and the tongue at the start
 INCISOR_RADIUS = 0.004        # m
 SHAPE_FRICTION = 0.3          # of the blade's and the incisors' shapes (pymunk's contact takes their product)
-INCISOR_CLEARANCE = 0.003     # m above the flange in the start pose
 INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad)
 HAND_REACH = {"insert": 0.025, "withdraw": 0.05, "up": 0.04}   # further in, the handle would be in the mouth
-PITCH_LIMIT = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,8 @@ class LaryngoscopeParams:
     preset: str = "omega"
     max_normal_force: float = 40.0
     max_sideways_force: float = 10.0
+    incisor_clearance: float = 0.003    # m above the flange in the start pose (the airway's mouth opening)
+    pitch_limit: float = 0.5            # rad either way (the airway's neck extension)
 
     @classmethod
     def from_config(cls, config: SceneConfig) -> "LaryngoscopeParams":
@@ -84,7 +88,9 @@ class LaryngoscopeParams:
         keys = ("blade_mass", "handle_mass", "coupling_stiffness", "coupling_damping", "rotational_stiffness",
                 "rotational_damping", "max_hand_speed", "max_sweep_speed", "max_pitch_rate", "friction", "max_substep",
                 "max_normal_force", "max_sideways_force")
+        patient = airway(config["airway"])
         return cls(radius=config["tissue"]["radius"], dt=config["dynamics"]["dt"], preset=dev["haptic_preset"],
+                   incisor_clearance=patient.mouth_opening * 1e-3, pitch_limit=patient.neck_extension,
                    **{k: dev[k] for k in keys})
 
     @property
@@ -155,7 +161,7 @@ class LaryngoscopeParams:
     def incisor(self) -> tuple[float, float]:
         """Centre of the incisal edge's rounding (local frame)."""
         hx, hy = self.heel_start
-        return (hx - INCISOR_SETBACK, hy + self.flange_height + INCISOR_CLEARANCE + INCISOR_RADIUS)
+        return (hx - INCISOR_SETBACK, hy + self.flange_height + self.incisor_clearance + INCISOR_RADIUS)
 
     @property
     def incisor_segment(self) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -169,8 +175,8 @@ class LaryngoscopeParams:
         """``(low, high)`` of the hand: grip x, grip z (m), pitch (rad), lateral y (m). The floor keeps a
         level blade above the tongue's centre (it can never be pushed through the tongue)."""
         gx, gy = self.grip_start
-        low = (gx - HAND_REACH["insert"], gy - (self.radius + START_GAP), -PITCH_LIMIT, -self.radius)
-        high = (gx + HAND_REACH["withdraw"], gy + HAND_REACH["up"], PITCH_LIMIT, self.radius)
+        low = (gx - HAND_REACH["insert"], gy - (self.radius + START_GAP), -self.pitch_limit, -self.radius)
+        high = (gx + HAND_REACH["withdraw"], gy + HAND_REACH["up"], self.pitch_limit, self.radius)
         return low, high
 
     def effective_mass(self, r: float) -> float:

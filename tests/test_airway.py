@@ -1,0 +1,156 @@
+"""Difficult airways (softenv.airway): the settings, the grades, what each changes in the scene, and the
+scripted expert on every grade."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import softenv  # noqa: F401
+from softenv.airway import GRADES, SETTINGS, airway, scene_title
+from softenv.envs import AIRWAY_DEVICE, airway_scene
+from softenv.envs.config import config_key, make_config
+from softenv.envs.scene import degrees_to_features
+from softenv.cli import main
+from softenv.training.hand import haptic_config
+from softenv.training.scoring import replay_hand, score_file, score_hand_log
+from softenv.training.logs import HAND_LOG, read_log, read_scene, save_log
+from softenv.training.trainee import degrade, expert_hand_log
+
+KEYED = ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task")
+
+
+def test_each_setting_left_at_none_takes_its_grades_value_and_a_given_one_wins():
+    for grade, (name, *values) in GRADES.items():
+        a = airway(make_config(airway={"grade": grade}, device=AIRWAY_DEVICE)["airway"])
+        assert a.settings == tuple(values) and a.name == name
+    a = airway(make_config(airway={"grade": 4, "mouth_opening": 7.5}, device=AIRWAY_DEVICE)["airway"])
+    assert a.mouth_opening == 7.5 and a.neck_extension == GRADES[4][2]
+
+
+def test_the_normal_airway_is_keyed_as_before_airways_existed_and_another_is_not():
+    """Caches, saved agents and anchors made before grades existed stay valid: grade 1 (or its settings
+    given by hand) adds nothing to a scene's key; any other airway does."""
+    plain = config_key(make_config(), KEYED)
+    assert "airway" not in plain
+    assert config_key(make_config(airway={"grade": 1, "mouth_opening": 3.0}), KEYED) == plain
+    graded = config_key(make_config(airway={"grade": 2}, device=AIRWAY_DEVICE), KEYED)
+    assert "airway" in graded and graded != config_key(make_config(device=AIRWAY_DEVICE), KEYED)
+    assert config_key(make_config(airway={"grade": 2}, device=AIRWAY_DEVICE), ("render",)) == \
+        config_key(make_config(), ("render",))                         # not keyed where it bears on nothing
+
+
+@pytest.mark.parametrize("sections, match", [
+    ({"airway": {"grade": 5}}, r"airway\.grade.*5"),
+    ({"airway": {"mouth_opening": -1.0}}, r"airway\.mouth_opening.*\[0, 20\]"),
+    ({"airway": {"neck_extension": 0.6}}, r"airway\.neck_extension.*\[0\.1, 0\.5\]"),
+    ({"airway": {"tongue_stiffness": float("nan")}}, r"airway\.tongue_stiffness"),
+    ({"airway": {"lift": 1.0}}, r"unknown key 'lift' in scene section 'airway'.*larynx_lift"),
+    # the hardest grade's targets need more force than SoftSphereHaptic-v0's device gives
+    ({"airway": {"grade": 4}}, r"task\.target_normal_force=\(20\.0, 40\.0\) \(on airway grade 4: \(28\.7.*57\.5.*\)\) "
+                               r"must lie within the device range \[0, 40\]"),
+])
+def test_bad_airways_name_the_key_value_and_range(sections, match):
+    with pytest.raises(ValueError, match=match):
+        make_config(**sections)
+
+
+def test_the_target_family_is_deepened_lifted_and_stiffened_as_set():
+    config = make_config(airway={"grade": 1, "larynx_depth": 5.0, "larynx_lift": 1.2, "tongue_stiffness": 1.1},
+                         device=AIRWAY_DEVICE)
+    world = gym.make("SoftSphereAirway-v0", **{k: config[k] for k in ("airway",)}).unwrapped.world
+    task, R = config["task"], config["tissue"]["radius"]
+    low = [task["target_insertion_deg"][0] + 5.0, task["target_lateral_deg"][0], task["target_normal_force"][0] * 1.32,
+           task["target_sideways_force"][0] * 1.1]
+    high = [task["target_insertion_deg"][1] + 5.0, task["target_lateral_deg"][1], task["target_normal_force"][1] * 1.32,
+            task["target_sideways_force"][1] * 1.1]
+    np.testing.assert_allclose(world.family.low, degrees_to_features(low, R), rtol=1e-12)
+    np.testing.assert_allclose(world.family.high, degrees_to_features(high, R), rtol=1e-12)
+
+
+def test_a_stiffer_tongue_needs_proportionally_more_force_for_the_same_shape():
+    """Linear tissue: displacement ~ F / E, so the stiff tongue's target under s times the force is the
+    normal tongue's shape; both share one shape model, so the same shape has the same b."""
+    normal = gym.make("SoftSphereAirway-v0").unwrapped
+    stiff = gym.make("SoftSphereAirway-v0", airway={"tongue_stiffness": 1.5}).unwrapped
+    assert np.array_equal(normal.world.scene.shape_model.components_, stiff.world.scene.shape_model.components_)
+    force = normal.world.family.centre
+    scaled = force * np.array([1.0, 1.0, 1.5, 1.5])
+    b_normal = normal.world.scene.response.predict_rowwise(force[None])[0]
+    b_stiff = stiff.world.scene.response.predict_rowwise(scaled[None])[0]
+    shape = normal.world.vertices(b_normal) - normal.world.vertices(normal.world.b_rest)
+    # the two tables interpolate the same law on grids of different force spacing: agreement to their error
+    assert np.max(np.abs(stiff.world.vertices(b_stiff) - normal.world.vertices(b_normal))) < 0.02 * np.max(np.abs(shape))
+    b_half = stiff.world.scene.response.predict_rowwise(force[None])[0]      # the normal force on the stiff tongue
+    shallow = stiff.world.vertices(b_half) - stiff.world.vertices(stiff.world.b_rest)
+    assert np.max(np.abs(shallow)) < 0.75 * np.max(np.abs(shape))
+
+
+@pytest.mark.parametrize("mouth_opening", [0.5, 3.0, 10.0])
+def test_the_mouth_opening_is_the_incisors_clearance_above_the_flange_at_the_start(mouth_opening):
+    env = gym.make("SoftSphereAirway-v0", airway={"mouth_opening": mouth_opening}).unwrapped
+    env.reset(seed=0)
+    env.step(np.zeros(4, np.float32))                # the hand held still: pymunk's shapes placed where the blade is
+    assert env.device.laryngoscope.incisor_clearance() == pytest.approx(mouth_opening * 1e-3, abs=1e-9)
+
+
+@pytest.mark.parametrize("grade", [1, 2])
+def test_the_neck_extension_bounds_the_blades_pitch(grade):
+    env = gym.make("SoftSphereAirway-v0", airway={"grade": grade}).unwrapped
+    env.reset(seed=0)
+    for _ in range(60):                                           # the wrist turned as far as it goes
+        env.step(np.array([0.0, 0.0, 0.0, 1.0], np.float32))
+    assert env.device.laryngoscope.hand_pose[2] == pytest.approx(GRADES[grade][2], abs=1e-12)
+
+
+def test_the_expert_succeeds_on_every_grade_with_its_tongue_force_rising_and_its_teeth_untouched():
+    """The published direction (Davis et al. 2023: tongue-base force rises from the normal to the most
+    restricted setting, for every group). The scripted expert lifts along the handle, so it never loads the
+    teeth on any grade (its incisor force cannot rise: docs/airways.md says so)."""
+    peaks = []
+    for grade in GRADES:
+        config = haptic_config(airway_scene(grade))
+        r = replay_hand(expert_hand_log(config), config)
+        assert r.time_to_target_s is not None and r.final_error_mm < 0.1 * r.rest_error_mm
+        assert r.clinical["peak_incisor_force_N"] == 0.0
+        peaks.append(r.clinical["peak_tongue_force_N"])
+    assert all(b > a + 2.0 for a, b in zip(peaks, peaks[1:])), peaks
+
+
+def test_a_lever_loads_the_teeth_sooner_through_a_restricted_mouth_opening():
+    normal, restricted = (haptic_config(airway_scene(grade)) for grade in (1, 3))
+    for config, loaded in ((normal, False), (restricted, True)):
+        r = replay_hand(degrade(expert_hand_log(config), config, lever=0.25), config)
+        assert (r.clinical["peak_incisor_force_N"] > 1.0) is loaded
+
+
+def test_a_graded_log_records_its_airway_and_scores_against_that_grades_expert(tmp_path):
+    config = haptic_config(airway_scene(3))
+    log = degrade(expert_hand_log(config), config, tremor=1.0)
+    path = tmp_path / "graded.csv"
+    save_log(log, path, HAND_LOG, scene=airway_scene(3))
+    assert read_scene(path) == airway_scene(3)
+    report = score_file(path)
+    parts, _, expert = score_hand_log(read_log(path, HAND_LOG)[1], config)       # as written (9 digits)
+    assert report["airway"] == {"grade": 3, "name": GRADES[3][0], "title": scene_title(config["airway"])}
+    assert report["score"] == parts["score"]
+    assert report["expert"]["peak_force_N"] == expert.peak_force_N
+    normal_expert = replay_hand(expert_hand_log(haptic_config(None)), haptic_config(None))
+    assert report["expert"]["peak_force_N"] > normal_expert.peak_force_N + 5.0
+    assert main(["score", str(path), "--grade", "1"]) == 2            # a grade that contradicts the log's own
+
+
+def test_play_runs_a_grade_and_its_log_records_it(tmp_path, capsys):
+    assert main(["play", "--headless", "--seconds", "0.3", "--grade", "4", "--out", str(tmp_path)]) == 0
+    log = next(tmp_path.glob("session_*.csv"))
+    assert read_scene(log) == airway_scene(4)
+    assert "airway grade 4" in "".join(log.read_text().splitlines()[:3])       # the note names it
+    assert main(["play", "--headless", "--grade", "0"]) == 2
+    assert "--grade" in capsys.readouterr().err
+
+
+def test_every_setting_is_documented_with_its_grades_values():
+    table = softenv.describe_config()
+    for key in ("grade", *SETTINGS):
+        assert f"| airway | {key} |" in table
