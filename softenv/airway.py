@@ -26,9 +26,9 @@ from typing import Any
 # grade -> (name, mouth opening mm, neck extension rad, larynx depth deg, larynx lift, tongue stiffness)
 GRADES: dict[int, tuple[str, float, float, float, float, float]] = {
     1: ("normal", 3.0, 0.5, 0.0, 1.0, 1.0),
-    2: ("restricted neck extension", 3.0, 0.35, 2.0, 1.1, 1.0),
-    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.1, 1.15),
-    4: ("restricted neck extension and mouth opening", 1.0, 0.35, 4.0, 1.25, 1.15),
+    2: ("restricted neck extension", 2.0, 0.4, 2.0, 1.1, 1.0),
+    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0),
+    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15),
 }
 SETTINGS = ("mouth_opening", "neck_extension", "larynx_depth", "larynx_lift", "tongue_stiffness")
 

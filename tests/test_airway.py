@@ -14,7 +14,7 @@ from softenv.envs.config import config_key, make_config
 from softenv.envs.scene import degrees_to_features
 from softenv.cli import main
 from softenv.training.hand import haptic_config
-from softenv.training.scoring import replay_hand, score_file, score_hand_log
+from softenv.training.scoring import ADVICE, AIRWAY_ADVICE, replay_hand, score_file, score_hand_log, score_log
 from softenv.training.logs import HAND_LOG, read_log, read_scene, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
@@ -133,12 +133,27 @@ def test_a_graded_log_records_its_airway_and_scores_against_that_grades_expert(t
     assert read_scene(path) == airway_scene(3)
     report = score_file(path)
     parts, _, expert = score_hand_log(read_log(path, HAND_LOG)[1], config)       # as written (9 digits)
-    assert report["airway"] == {"grade": 3, "name": GRADES[3][0], "title": scene_title(config["airway"])}
+    assert {k: report["airway"][k] for k in ("grade", "name", "title")} == \
+        {"grade": 3, "name": GRADES[3][0], "title": scene_title(config["airway"])}
+    assert report["airway"]["target_force_N"] == pytest.approx(30.0 * GRADES[3][4])
     assert report["score"] == parts["score"]
     assert report["expert"]["peak_force_N"] == expert.peak_force_N
     normal_expert = replay_hand(expert_hand_log(haptic_config(None)), haptic_config(None))
     assert report["expert"]["peak_force_N"] > normal_expert.peak_force_N + 5.0
     assert main(["score", str(path), "--grade", "1"]) == 2            # a grade that contradicts the log's own
+
+
+def test_advice_on_a_graded_airway_says_what_that_airway_asks():
+    config = haptic_config(airway_scene(4))
+    report = score_log(degrade(expert_hand_log(config), config, lever=0.3), HAND_LOG, config, "lever.csv",
+                       airway_scene(4), "the caller")
+    deeper = AIRWAY_ADVICE["accuracy"].format(**report["airway"]["settings"], target_force=0.0)
+    assert "4 deg deeper" in deeper
+    assert report["advice"][0] == ADVICE["accuracy"] + " " + deeper
+    normal = haptic_config(None)
+    plain = score_log(degrade(expert_hand_log(normal), normal, lever=0.3), HAND_LOG, normal, "lever.csv", {},
+                      "the caller")
+    assert plain["advice"][0] == ADVICE["accuracy"]                 # the normal airway's advice alone
 
 
 def test_play_runs_a_grade_and_its_log_records_it(tmp_path, capsys):

@@ -215,7 +215,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
     "airway": {
         "grade": Field(1, "", "1-4", _choice(*GRADES),
                        "difficult-airway grade: 1 normal, 2 restricted neck extension, 3 restricted mouth opening, 4 "
-                       "both (docs: airways); the settings below left at None take the grade's values"),
+                       "both with a stiff tongue (docs: airways); the settings below left at None take the grade's "
+                       "values"),
         "mouth_opening": Field(None, "mm", "[0, 20] | None", _optional(_real(0, 20)),
                                "the upper incisal edge's clearance above the blade's flange in the start pose "
                                "(grade 1: 3)"),

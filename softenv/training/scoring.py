@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..airway import airway, scene_title, target_ranges
+from ..airway import SETTINGS, airway, scene_title, target_ranges
 from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
@@ -85,6 +85,15 @@ ADVICE = {
 }
 
 
+# what a graded airway adds to a part's advice (softenv.airway), formatted with its settings and its target's force
+AIRWAY_ADVICE = {
+    "teeth": "On this airway the upper teeth sit {mouth_opening:g} mm above the blade's flange at the start: the "
+             "least levering reaches them.",
+    "safety": "This airway's target needs about {target_force:.0f} N: build the lift steadily and stop there.",
+    "accuracy": "On this airway the view lies {larynx_depth:g} deg deeper: slide the blade further in before lifting.",
+}
+
+
 def points_to_gain(parts: dict[str, float], expert_parts: dict[str, float],
                    weights: dict[str, float]) -> dict[str, float]:
     """For each part, the points the score would gain with that part alone as good as the expert's (0 where the
@@ -95,10 +104,14 @@ def points_to_gain(parts: dict[str, float], expert_parts: dict[str, float],
 
 def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
     """The advice for the ``n`` parts whose shortfall against the expert's costs the most points, largest first
-    (fewer where fewer parts fall short)."""
+    (fewer where fewer parts fall short); on a graded airway, with what that airway asks of the part."""
     gain = report["points_to_gain"]
     worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
-    return [ADVICE[k].format(safe_force=report["safe_force_N"]) for k in worst]
+    patient = report.get("airway")
+    graded = patient is not None and patient["title"] != "SoftSphereHaptic-v0"
+    return [ADVICE[k].format(safe_force=report["safe_force_N"])
+            + (" " + AIRWAY_ADVICE[k].format(**patient["settings"], target_force=patient["target_force_N"])
+               if graded and k in AIRWAY_ADVICE else "") for k in worst]
 
 
 @dataclass
@@ -350,7 +363,10 @@ def score_log(table: np.ndarray, schema: Schema, config: SceneConfig, path: str 
         formula, weights = FORMULA, WEIGHTS
     patient = airway(config["airway"])
     report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": sections, "scene_from": scene_from,
-              "airway": {"grade": patient.grade, "name": patient.name, "title": scene_title(config["airway"])}, **parts,
+              "airway": {"grade": patient.grade, "name": patient.name, "title": scene_title(config["airway"]),
+                         "settings": dict(zip(SETTINGS, patient.settings)),
+                         "target_force_N": float(np.mean(target_ranges(config["task"], config["airway"])["target_normal_force"]))},
+              **parts,
               "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,
               "points_to_gain": points_to_gain(parts, expert_parts, weights),
               "metrics": _summary(trainee), "expert": _summary(expert), "formula": formula}
