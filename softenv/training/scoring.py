@@ -107,8 +107,8 @@ def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
     (fewer where fewer parts fall short); on a graded airway, with what that airway asks of the part."""
     gain = report["points_to_gain"]
     worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
-    patient = report.get("airway")
-    graded = patient is not None and patient["title"] != "SoftSphereHaptic-v0"
+    patient = report.get("airway") or {}
+    graded = bool(patient) and patient["title"] != "SoftSphereHaptic-v0"
     return [ADVICE[k].format(safe_force=report["safe_force_N"])
             + (" " + AIRWAY_ADVICE[k].format(**patient["settings"], target_force=patient["target_force_N"])
                if graded and k in AIRWAY_ADVICE else "") for k in worst]
