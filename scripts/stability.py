@@ -7,7 +7,8 @@
    reference (over the radius), whether everything stayed finite, and whether the surfaces stayed
    valid: no vertex past the centre (each stays on its own side: ``x . x_rest > 0``) and no inverted
    triangle (every triangle's normal keeps facing out). The analytic tissue itself is checked at forces
-   to 10x the device's range. Laryngoscope cases step SoftSphereHaptic-v0 the same way.
+   to 10x the device's range. Laryngoscope cases step SoftSphereHaptic-v0 the same way, and airway cases
+   SoftSphereAirway-v0 at each grade and with every airway setting at the ends of its range.
 2. Soak: 1,000,000 steps of SoftSphere-v0 and of each laryngoscope id in one process, and each
    laryngoscope id's batched twin at 1,024 envs for 10,000 steps; half random, half bang-bang actions:
    memory at each tenth (Python allocations and the process's resident size), speed early and late,
@@ -37,6 +38,7 @@ import gymnasium as gym
 import numpy as np
 
 from softenv._artifact import write_text
+from softenv.airway import GRADES
 import softenv  # noqa: F401
 from softenv.tissue import AnalyticTissue
 from softenv.bench.timing import code_revision
@@ -68,6 +70,16 @@ CASES: list[tuple[str, str, dict[str, Any]]] = [
     ("blade and handle 10 kg", "SoftSphereHaptic-v0", {"device": {"blade_mass": 10.0, "handle_mass": 10.0}}),
     ("laryngoscope on E = 1e-3 Pa", "SoftSphereHaptic-v0", {"tissue": {"E": 1e-3}}),
     ("laryngoscope on E = 1e12 Pa", "SoftSphereHaptic-v0", {"tissue": {"E": 1e12}}),
+    *((f"airway grade {grade}", "SoftSphereAirway-v0", {"airway": {"grade": grade}}) for grade in GRADES),
+    ("airway at its narrowest: teeth on the flange, neck 0.1 rad, larynx +10 deg, tongue 2x", "SoftSphereAirway-v0",
+     {"airway": {"grade": 4, "mouth_opening": 0.0, "neck_extension": 0.1, "larynx_depth": 10.0, "larynx_lift": 0.5,
+                 "tongue_stiffness": 2.0}, "device": {"max_sideways_force": 20.0}}),
+    ("airway at its widest: 20 mm, neck 0.5 rad, larynx -20 deg, tongue 0.5x", "SoftSphereAirway-v0",
+     {"airway": {"mouth_opening": 20.0, "neck_extension": 0.5, "larynx_depth": -20.0, "larynx_lift": 2.0,
+                 "tongue_stiffness": 0.5}}),
+    ("airway lift 2x on a stiff tongue: forces to 160 N", "SoftSphereAirway-v0",
+     {"airway": {"grade": 4, "larynx_lift": 2.0, "tongue_stiffness": 2.0},
+      "device": {"max_normal_force": 160.0, "max_sideways_force": 20.0}}),
 ]
 
 
