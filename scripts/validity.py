@@ -194,7 +194,7 @@ def figure(known: pd.DataFrame, sessions: pd.DataFrame, result: dict[str, Any], 
     retest_ax.scatter(wide[1], wide[2], s=10, alpha=0.6)
     retest_ax.plot([0, 100], [0, 100], "k:", lw=1)
     r = result["retest"]["all"]
-    retest_ax.set_title(f"test-retest: ICC(2,1) {r['icc']:.3f} [{r['low']:.2f}, {r['high']:.2f}]", fontsize=9)
+    retest_ax.set_title(f"test-retest: ICC(2,1) {r['icc']:.2f} [{r['low']:.2f}, {r['high']:.2f}]", fontsize=9)
     retest_ax.set_xlabel("session 1 score")
     retest_ax.set_ylabel("session 2 score")
     d = result["difficulty"]
