@@ -36,7 +36,7 @@ from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import ORACLE, anchor_job
 from .minari_datasets import KINDS, dataset_id, load_or_make
-from .evaluate import CLINICAL, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
+from .evaluate import CLINICAL, GRADED_SCENES, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .policies import BASELINES, applies, make_baseline
 from .run_store import RunStore
 
@@ -51,6 +51,8 @@ class Plan:
     episodes: int = 100
     oracle: dict[str, Any] = field(default_factory=dict)   # TrajectoryOracle settings (laryngoscope scenes)
     dataset_episodes: int = 100                        # episodes of each offline agent's dataset
+    train_on: list[str] = field(default_factory=list)  # scenes the agents train on, each evaluated on every scene
+                                                       # (empty: each agent trains and is evaluated on its own)
 
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
@@ -78,15 +80,33 @@ def quick_plan() -> Plan:
                 {"ppo": 50_000, "sac": 10_000, "td3": 10_000, "sac-her": 10_000})
 
 
+MAIN_SCENES = [s for s in SCENES if s not in GRADED_SCENES.values()]     # the graded airways run on their own
+TRAIN_GRADES = (1, 2)          # the easier airways agents train on in the graded profile
+
+
 def full_plan() -> Plan:
-    return Plan(list(SCENES), list(BASELINES), list(ALGOS), {s: 5 if s in FIVE_SEEDS else 3 for s in SCENES})
+    return Plan(list(MAIN_SCENES), list(BASELINES), list(ALGOS), {s: 5 if s in FIVE_SEEDS else 3 for s in MAIN_SCENES})
 
 
 def haptic_plan() -> Plan:
     """The laryngoscope scenes alone: every baseline for the device, the four agents at their YAML budgets
     (where their learning curves flatten, ``results/haptic-curves/``), 3 training seeds each."""
-    scenes = [s for s in SCENES if device_kind(s) == "laryngoscope"]
+    scenes = [s for s in MAIN_SCENES if device_kind(s) == "laryngoscope"]
     return Plan(scenes, list(BASELINES), list(ALGOS), {s: 3 for s in scenes})
+
+
+def graded_plan() -> Plan:
+    """Generalisation to harder airways: every grade of SoftSphereAirway-v0 with the device's baselines
+    and its own oracle anchors; the four agents trained on the easier grades (:data:`TRAIN_GRADES`) at their
+    YAML budgets, 3 seeds, each evaluated on every grade."""
+    scenes = list(GRADED_SCENES.values())
+    return Plan(scenes, list(BASELINES), list(ALGOS), {s: 3 for s in scenes},
+                train_on=[GRADED_SCENES[g] for g in TRAIN_GRADES])
+
+
+def trained_policy(algo: str, train_scene: str) -> str:
+    """A transferred agent's name in the tables: ``ppo (trained on grade1)``."""
+    return f"{algo} (trained on {train_scene.rpartition('/')[2]})"
 
 
 def offline_plan() -> Plan:
@@ -110,6 +130,12 @@ def check_names(plan: Plan) -> None:
     for name in plan.agents:
         if name not in AGENTS:
             raise ValueError(f"unknown agent {name!r}; valid agents: {list(AGENTS)}")
+    for name in plan.train_on:
+        if name not in plan.scenes:
+            raise ValueError(f"agents train on {name!r}, which is not among the plan's scenes {plan.scenes}")
+        if any(a not in ALGOS for a in plan.agents):
+            raise ValueError(f"agents evaluated on other scenes than their own must be SB3 agents {list(ALGOS)}, "
+                             f"got {plan.agents}")
 
 
 def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
@@ -120,14 +146,21 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
         out.append(Job(f"{scene} anchors", anchor_job, (scene, plan.episodes, plan.oracle)))
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
-        for algo in plan.agents:
+        for algo in plan.agents if not plan.train_on else ():
             fn = torch_agent_job if algo == TORCH_PPO else offline_agent_job if algo in OFFLINE_AGENTS else agent_job
             extra = (plan.dataset_episodes,) if algo in OFFLINE_AGENTS else ()
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
                 out.append(Job(f"{scene} {algo} seed {seed}", fn,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes, *extra)))
-    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, offline_agent_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+    for scene in plan.train_on:                       # each trained once, then evaluated on every scene
+        for algo in plan.agents:
+            for seed in range(plan.seeds[scene]):
+                run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
+                out.append(Job(transfer_key(scene, algo, seed), transfer_job,
+                               (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes,
+                                tuple(plan.scenes))))
+    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, offline_agent_job, transfer_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
         or job.args[0] == GRADIENT_PLANNER \
         else 2  # noqa: E731
     return sorted(out, key=expected)
@@ -160,13 +193,31 @@ def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None
     _torch_single_thread()
     path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
     agent = load_agent(path, scene)
-    episodes_ = evaluate(agent, scene, episodes)
-    log = Path(run_dir) / "eval" / "evaluations.npz"
-    curve = None
-    if log.exists():
-        with np.load(log, allow_pickle=False) as data:
-            curve = (data["timesteps"], data["results"].mean(axis=1))
-    return episodes_, curve
+    return evaluate(agent, scene, episodes), learning_curve(Path(run_dir))
+
+
+def transfer_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
+                 eval_scenes: tuple[str, ...]) -> tuple[list[Episodes], tuple[np.ndarray, np.ndarray] | None]:
+    """Train one agent on ``scene`` (or load its finished run), then evaluate it on each of ``eval_scenes``
+    (scenes of one observation and action space: the airway grades); its learning curve as :func:`agent_job`'s."""
+    _torch_single_thread()
+    path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
+    agent = load_agent(path, scene)
+    evaluated = [evaluate(agent, other, episodes) for other in eval_scenes]
+    return evaluated, learning_curve(Path(run_dir))
+
+
+def transfer_key(scene: str, algo: str, seed: int) -> str:
+    return f"{scene} {algo} seed {seed} (evaluated on every scene)"
+
+
+def learning_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """An SB3 run's learning curve: test-target return against env steps (its EvalCallback's log)."""
+    log = run_dir / "eval" / "evaluations.npz"
+    if not log.exists():
+        return None
+    with np.load(log, allow_pickle=False) as data:
+        return data["timesteps"], data["results"].mean(axis=1)
 
 
 def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
@@ -283,20 +334,26 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             timings[r.key] = r.wall_s
             if r.ok:
                 summaries.append(_with(anchored(r.value).summary(), kind="baseline", seeds=1))
-        for algo in plan.agents:
-            runs = [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])]
-            timings[f"{scene} {algo}"] = sum(r.wall_s for r in runs)
+        # each agent's runs by training seed on this scene: its own, or each training scene's evaluated here
+        trained = [(algo, scene, algo, [results[f"{scene} {algo} seed {seed}"] for seed in range(plan.seeds[scene])],
+                    lambda value: value[0]) for algo in plan.agents if not plan.train_on]
+        at = plan.scenes.index(scene)
+        trained += [(algo, train, trained_policy(algo, train),
+                     [results[transfer_key(train, algo, seed)] for seed in range(plan.seeds[train])],
+                     lambda value: value[0][at]) for train in plan.train_on for algo in plan.agents]
+        for algo, train, policy, runs, episodes_of in trained:
+            timings[f"{scene} {policy}"] = sum(r.wall_s for r in runs)
             done = [r.value for r in runs if r.ok]
             if not done:
                 continue
-            curves[(scene, algo)] = [curve for _, curve in done if curve is not None]
-            pooled = [e for e, _ in done]
+            curves[(train, algo)] = [curve for _, curve in done if curve is not None]
+            pooled = [episodes_of(v) for v in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
-            merged = Episodes(algo, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
+            merged = Episodes(policy, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
             merged.values["normalized_score"] = np.concatenate(
                 [anchored(e).values["normalized_score"] for e in pooled])
-            seed_scores = [anchored(r.value[0]).summary()["normalized_score"] if r.ok else None for r in runs]
-            summaries.append(_with(merged.summary(), kind=_agent_kind(plan, algo, scene), seeds=len(done),
+            seed_scores = [anchored(episodes_of(r.value)).summary()["normalized_score"] if r.ok else None for r in runs]
+            summaries.append(_with(merged.summary(), kind=_agent_kind(plan, algo, train), seeds=len(done),
                                    seed_scores=seed_scores))
     elapsed = time.perf_counter() - started
     how = describe(executor, n_jobs)
@@ -478,7 +535,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           f"stable-baselines3 {prov['stable_baselines3']}, torch {prov['torch']}).\n",
           f"Protocol: test targets only; {plan.episodes} episodes per policy and scene (per training seed for "
           f"agents); training seeds per agent: {_listed(plan.seeds)}; agent budgets (env steps): "
-          f"{'; '.join(f'{a} {_listed(b)}' for a, b in budgets.items()) or 'none'}. Cells: "
+          f"{'; '.join(f'{a} {_listed(b)}' for a, b in budgets.items()) or 'none'}"
+          + (f"; agents trained on {', '.join(plan.train_on)} (their budgets those scenes'), each evaluated on every "
+             "scene" if plan.train_on else "") + ". Cells: "
           "mean [95 % interval: a bootstrap over the test episodes; for agents over their training seeds, then the "
           "episodes of each drawn seed, so seeds that learned apart widen it]; IQM = interquartile mean. Normalized score: 100 (E_zero - E) / (E_zero - "
           "E_oracle) per episode, E = the episode's summed RMS shape error on its target; 0 = no force, 100 = the planning "
@@ -493,7 +552,9 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
              "episodes; the table above pools them):\n", format_seeds(summaries), ""]
             if any("seed_scores" in s for s in summaries) else []),
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times), "
-          f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`."]
+          f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`"
+          + (f", `{stem}_grades.png` (score against airway grade)" if any(s in GRADED_SCENES.values() for s in plan.scenes)
+             else "") + "."]
     if failed:
         md += ["", "Failed jobs (missing from the table): " + "; ".join(f"{r.key}: {r.error}" for r in failed)]
     figures = _plots(summaries, plan, out_dir, curves, command, stem)
@@ -522,9 +583,37 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt                         # the viz extra
 
+    graded = [(g, scene) for g, scene in GRADED_SCENES.items() if scene in plan.scenes]
     return [(out_dir / _error_plot_name(stem), _error_plot(summaries, plan.scenes, command, plt)),
             (out_dir / f"{stem}_learning_curves.png", _learning_curves(plan, curves, command, plt)),
-            (out_dir / f"{stem}_gallery.png", _gallery(plan.scenes[0], command, plt))]
+            (out_dir / f"{stem}_gallery.png", _gallery(plan.scenes[0], command, plt)),
+            *([(out_dir / f"{stem}_grades.png", _grade_plot(summaries, graded, plan, command, plt))] if graded else [])]
+
+
+def _grade_plot(summaries: list[dict[str, Any]], graded: list[tuple[int, str]], plan: Plan, command: str,
+                plt: Any) -> Any:
+    """Each policy's normalized score (mean, 95 % interval) against the airway grade: generalisation to
+    harder airways, the grades agents trained on marked."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.6))
+    names = list(dict.fromkeys(s["policy"] for s in summaries if s["scene"] in dict(graded).values()))
+    for i, name in enumerate(names):
+        cells = {s["scene"]: s["normalized_score"] for s in summaries if s["policy"] == name}
+        grades = [g for g, scene in graded if scene in cells]
+        mean = np.array([cells[GRADED_SCENES[g]]["mean"] for g in grades])
+        low = mean - np.array([cells[GRADED_SCENES[g]]["ci_low"] for g in grades])
+        high = np.array([cells[GRADED_SCENES[g]]["ci_high"] for g in grades]) - mean
+        offset = (i - (len(names) - 1) / 2) * 0.04         # side by side where they agree
+        ax.errorbar(np.array(grades) + offset, mean, yerr=[low, high], fmt="o-", ms=4, capsize=2, label=name)
+    grade_of = {scene: g for g, scene in GRADED_SCENES.items()}
+    for scene in plan.train_on:
+        ax.axvspan(grade_of[scene] - 0.3, grade_of[scene] + 0.3, color="0.92", zorder=0)
+    ax.set_xticks([g for g, _ in graded])
+    ax.set_xlabel("airway grade (shaded: the grades agents trained on)")
+    ax.set_ylabel("normalized score (0 no force, 100 the oracle)")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
+    _suptitle(fig, "score against airway grade (mean, 95 % interval)", command)
+    fig.tight_layout()
+    return fig
 
 
 def _error_plot(summaries: list[dict[str, Any]], scenes: list[str], command: str, plt: Any) -> Any:

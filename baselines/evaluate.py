@@ -10,6 +10,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from softenv.airway import GRADES
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES
 from softenv.stats import bootstrap_ci, iqm, nested_interval
 
@@ -40,6 +41,9 @@ SCENES: dict[str, tuple[str, dict[str, Any]]] = {
     "SoftSphereHapticProcedure-v0": ("SoftSphereHapticProcedure-v0", {}),
     "SoftSphere-v0/fem": ("SoftSphere-v0", {"tissue": {"model": "fem"}}),     # the finite-element tongue
 }
+# the difficult airways (softenv.airway): SoftSphereAirway-v0 at each grade, one device range for all
+GRADED_SCENES = {grade: f"SoftSphereAirway-v0/grade{grade}" for grade in GRADES}
+SCENES.update({scene: ("SoftSphereAirway-v0", {"airway": {"grade": grade}}) for grade, scene in GRADED_SCENES.items()})
 
 
 def episode_seeds(episodes: int = EPISODES) -> list[int]:

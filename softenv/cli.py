@@ -157,9 +157,10 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
 
 def compare_plan(args: argparse.Namespace) -> tuple[benchmark.Plan, str]:
     """The plan of ``softenv compare`` (its profile, narrowed by the options) and its report's stem."""
-    profile = "quick" if args.quick else "haptic" if args.haptic else "offline" if args.offline else "full"
+    profile = "quick" if args.quick else "haptic" if args.haptic else "offline" if args.offline else \
+        "graded" if args.graded else "full"
     plan = {"quick": benchmark.quick_plan, "haptic": benchmark.haptic_plan, "offline": benchmark.offline_plan,
-            "full": benchmark.full_plan}[profile]()
+            "graded": benchmark.graded_plan, "full": benchmark.full_plan}[profile]()
     if args.scenes:
         plan.scenes = args.scenes
         plan.seeds = {s: plan.seeds.get(s, 5 if s in benchmark.FIVE_SEEDS else 3) for s in args.scenes}
@@ -468,6 +469,10 @@ def build_parser() -> argparse.ArgumentParser:
                          help="the two laryngoscope scenes, every baseline, the four agents at their converged budgets "
                               "over 3 seeds (report benchmark_haptic.*; on 2 cores about 3 h from an empty --runs, 9 min with "
                               "its agents trained)")
+    profile.add_argument("--graded", action="store_true",
+                         help="the difficult airways: SoftSphereAirway-v0 at every grade, its baselines and oracle "
+                              "per grade, the agents trained on grades 1 and 2 and evaluated on every grade "
+                              "(report benchmark_graded.*, with score against grade in benchmark_graded_grades.png)")
     profile.add_argument("--offline", action="store_true",
                          help="behaviour cloning and TD3+BC on each Minari dataset of SoftSphereHaptic-v0 (made first "
                               "where missing), 3 seeds each (report benchmark_offline.*; needs softenv[offline])")

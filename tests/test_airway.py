@@ -169,3 +169,30 @@ def test_every_setting_is_documented_with_its_grades_values():
     table = softenv.describe_config()
     for key in ("grade", *SETTINGS):
         assert f"| airway | {key} |" in table
+
+
+def test_the_graded_profile_trains_on_the_easier_grades_and_evaluates_every_grade(tmp_path):
+    from softenv.baselines.benchmark import Plan, graded_plan, run, trained_policy
+    from softenv.baselines.evaluate import GRADED_SCENES
+
+    full = graded_plan()
+    assert full.scenes == list(GRADED_SCENES.values()) and full.train_on == [GRADED_SCENES[1], GRADED_SCENES[2]]
+    easy, hard = GRADED_SCENES[1], GRADED_SCENES[4]
+    plan = Plan([easy, hard], ["zero", "expert"], ["ppo"], {easy: 1, hard: 1}, {"ppo": 2048}, episodes=3,
+                oracle={"candidates": 4, "iterations": 2, "elites": 2}, train_on=[easy])
+    lines: list[str] = []
+    summaries = run(plan, tmp_path, tmp_path / "runs", "softenv compare --graded --test", echo=lines.append,
+                    stem="benchmark_graded")
+    cells = {(s["scene"], s["policy"]): s for s in summaries}
+    agent = trained_policy("ppo", easy)
+    assert agent == "ppo (trained on grade1)" and (easy, agent) in cells and (hard, agent) in cells
+    assert len(list((tmp_path / "runs" / easy.replace("/", "_")).glob("ppo-0"))) == 1     # trained once
+    assert not (tmp_path / "runs" / hard.replace("/", "_")).exists()
+    # the expert on each grade against that grade's own oracle; the hard grade needs more force
+    assert cells[(hard, "expert")]["peak_tongue_force_N"]["mean"] > cells[(easy, "expert")]["peak_tongue_force_N"]["mean"]
+    assert (tmp_path / "benchmark_graded_grades.png").stat().st_size > 10_000
+    md = (tmp_path / "benchmark_graded.md").read_text()
+    assert f"agents trained on {easy} (their budgets those scenes'), each evaluated on every scene" in md
+    assert f"| {hard} | {agent} |" in md
+    with pytest.raises(ValueError, match="not among the plan's scenes"):
+        run(Plan([hard], ["zero"], ["ppo"], {hard: 1}, train_on=[easy]), tmp_path, tmp_path / "r", "", write=False)

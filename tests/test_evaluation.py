@@ -9,14 +9,15 @@ import pytest
 from softenv import stats
 from softenv.baselines import anchors as anchors_module
 from softenv.baselines.anchors import compute_anchors, load_anchors, read_anchors, scene_config
-from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate, normalized_scores
+from softenv.baselines.evaluate import GRADED_SCENES, SCENES, device_kind, episode_seeds, evaluate, normalized_scores
 from softenv.baselines.policies import RandomPolicy, SB3Policy, ZeroPolicy
 from softenv.envs.world import World
 from softenv.evaluation import Evaluation, aggregate, evaluate_policy
 
 # a sample of each scene's shipped episodes, recomputed: (scene, seeds); the laryngoscope's take seconds each
-SAMPLE = [(scene, [1000, 1063]) for scene in SCENES if "Haptic" not in scene] + \
-         [("SoftSphereHaptic-v0", [1037]), ("SoftSphereHapticProcedure-v0", [1081])]
+SAMPLE = [(scene, [1000, 1063]) for scene in SCENES if device_kind(scene) == "ideal"] + \
+         [("SoftSphereHaptic-v0", [1037]), ("SoftSphereHapticProcedure-v0", [1081])] + \
+         [(scene, [1000 + 23 * grade]) for grade, scene in GRADED_SCENES.items()]
 
 
 @pytest.mark.parametrize("scene, seeds", SAMPLE)
