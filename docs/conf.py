@@ -19,6 +19,7 @@ import gymnasium as gym  # noqa: E402
 
 import softenv  # noqa: E402
 from softenv import leaderboard  # noqa: E402
+from softenv.airway import grade_table  # noqa: E402
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES  # noqa: E402
 from softenv.envs.single import SoftSphereEnv  # noqa: E402
 
@@ -178,6 +179,7 @@ def generate() -> None:
         (out / "envs" / f"{env_id}.md").write_text(env_page(env_id, scene))
     (out / "env_class.inc").write_text(markdown(SoftSphereEnv.__doc__ or "") + "\n")
     (out / "settings_table.inc").write_text(softenv.describe_config() + "\n")
+    (out / "airway_grades.inc").write_text(grade_table() + "\n")
     (out / "api.md").write_text(api_page())
     (out / "leaderboard.md").write_text(leaderboard_page())
 

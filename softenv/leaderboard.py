@@ -38,7 +38,7 @@ import softenv
 from . import stats
 from ._artifact import save_figure, write_text
 from .baselines.anchors import load_anchors, oracle_of, scene_config, scene_hash
-from .baselines.evaluate import EPISODES, PROTOCOL_VERSION, SCENES, SPLIT, device_kind, episode_seeds, normalized_scores
+from .baselines.evaluate import EPISODES, GRADED_SCENES, PROTOCOL_VERSION, SCENES, SPLIT, device_kind, episode_seeds, normalized_scores
 from .bench.timing import machine_info
 from .evaluation import Evaluation, score_aggregates
 
@@ -209,10 +209,12 @@ def table(records: list[dict[str, Any]], highlight: str | None = None) -> str:
 # -- across scenes (rliable's aggregates) ----------------------------------------------------------------
 
 def scene_groups() -> dict[str, list[str]]:
-    """The benchmark's scenes by device: methods are compared across the scenes of one device."""
+    """The benchmark's scenes by device: methods are compared across the scenes of one device; the graded
+    airways form a group of their own (a method is aggregated over every grade, or not at all)."""
     groups: dict[str, list[str]] = {}
+    graded = set(GRADED_SCENES.values())
     for scene in SCENES:
-        groups.setdefault(device_kind(scene), []).append(scene)
+        groups.setdefault("graded airways" if scene in graded else device_kind(scene), []).append(scene)
     return groups
 
 

@@ -1,7 +1,7 @@
 """Scene configuration: a validated, declarative description of what an environment builds.
 
 A scene is a nested mapping of sections (``tissue``, ``mesh``, ``shape_model``, ``response``,
-``device``, ``dynamics``, ``task``, ``reward``, ``render``). :func:`default_config` returns the
+``device``, ``dynamics``, ``task``, ``reward``, ``airway``, ``render``). :func:`default_config` returns the
 defaults; :func:`make_config` merges overrides (``gym.make("SoftSphere-v0", dynamics={"kind":
 "viscoelastic"})``) and validates every value. An unknown section or key, or a value out of range,
 raises a ``ValueError`` that lists the valid keys with their units and ranges. :func:`describe_config`

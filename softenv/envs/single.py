@@ -137,7 +137,7 @@ class SoftSphereEnv(gym.Env):
     ``gym.make("SoftSphere-v0", render_mode=None, obs_mode="vector", **scene)`` where ``scene`` are
     section dicts merged key by key into the id's scene and :func:`softenv.default_config`
     (``tissue``, ``mesh``, ``shape_model``, ``response``, ``device``, ``dynamics``, ``task``,
-    ``reward``, ``render``); e.g. ``gym.make("SoftSphere-v0", tissue={"law": "stiffening"},
+    ``reward``, ``airway``, ``render``); e.g. ``gym.make("SoftSphere-v0", tissue={"law": "stiffening"},
     reward={"force_weight": 0.5})`` or ``gym.make("SoftSphere-v0", device={"kind": "laryngoscope"})``.
     Unknown keys or values out of range raise ``ValueError`` listing what is valid.
     ``softenv.describe_config()`` prints every setting with units.
@@ -149,12 +149,15 @@ class SoftSphereEnv(gym.Env):
     | ``SoftSphereProcedure-v0`` | as v0 with the target moving insert -> press -> sweep |
     | ``SoftSphereHaptic-v0`` | laryngoscope, dt = 20 ms (20 substeps of 1 ms), reach one target in 250 steps |
     | ``SoftSphereHapticProcedure-v0`` | laryngoscope, the procedure over 500 steps (10 s) |
+    | ``SoftSphereAirway-v0`` | as SoftSphereHaptic-v0 on a device range of 60 N and 15 N, for difficult airways: ``airway={"grade": g}``, g = 1 (normal) to 4 (:mod:`softenv.airway`) |
 
     ## Version History
 
     * v0: initial release. Since 2026-11-25 the ids register no ``max_episode_steps``
       (``env.spec.max_episode_steps`` is ``None``; read ``env.unwrapped.world.horizon``) and HER's
-      ``compute_reward`` includes the device's reward terms.
+      ``compute_reward`` includes the device's reward terms. Since 2026-11-28 an ``airway`` section
+      (grade 1, the normal airway, leaves every scene as it was: the same keys, caches and anchors),
+      and ``SoftSphereAirway-v0``.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}
