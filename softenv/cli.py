@@ -38,6 +38,7 @@ from ._progress import Progress
 from ._validation import check_int, check_real, printable
 from .training import play
 from .haptics.bridge import LOOPBACK
+from .training.hand import haptic_config
 from .training.inputs import CONTROLS
 from .training.logs import EXAMPLES, MAX_DURATION_S, example_log
 from .training.scoring import score_file
@@ -374,15 +375,17 @@ def cmd_play(args: argparse.Namespace) -> None:
     if args.bridge is not None and args.device != "keys":
         raise ValueError(f"--bridge and --device {args.device} both drive the hand: give one")
     store = open_store(args)                         # before the session, for the same reason
+    scene = airway_scene(args.grade) if args.grade is not None else None
+    config = haptic_config(scene)                    # the device's workspace is the session's airway's
     bridge = device = None
     if args.bridge is not None:
-        bridge = play.open_bridge(*args.bridge)
+        host, port = args.bridge
+        bridge = play.open_bridge(host, port, config)
         host, port = bridge.address
         print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.haptics.bridge)")
     elif args.device != "keys":
-        device = play.open_haptic_device(args.device)
+        device = play.open_haptic_device(args.device, config)
     try:
-        scene = airway_scene(args.grade) if args.grade is not None else None
         session = play.run(args.seconds, args.out, scene, bridge=bridge, device=device, screens=not args.headless)
         if store is not None:
             keep_session(store, session.log_path, args.trainee, "play")

@@ -196,3 +196,19 @@ def test_the_graded_profile_trains_on_the_easier_grades_and_evaluates_every_grad
     assert f"| {hard} | {agent} |" in md
     with pytest.raises(ValueError, match="not among the plan's scenes"):
         run(Plan([hard], ["zero"], ["ppo"], {hard: 1}, train_on=[easy]), tmp_path, tmp_path / "r", "", write=False)
+
+
+def test_a_device_driving_a_graded_session_is_held_to_that_grades_workspace(monkeypatch):
+    from softenv.training import play
+    from softenv.training.hand import workspace
+
+    seen = {}
+
+    def bridge(host, port, config=None):
+        seen["config"] = config
+        raise ValueError("stopped before the session")
+
+    monkeypatch.setattr(play, "open_bridge", bridge)
+    assert main(["play", "--headless", "--grade", "2", "--bridge", "0"]) == 2
+    low, high = workspace(seen["config"])
+    assert (low[2], high[2]) == (-GRADES[2][2], GRADES[2][2])          # the neck's pitch range, not grade 1's
