@@ -593,26 +593,39 @@ def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
 def _grade_plot(summaries: list[dict[str, Any]], graded: list[tuple[int, str]], plan: Plan, command: str,
                 plt: Any) -> Any:
     """Each policy's normalized score (mean, 95 % interval) against the airway grade: generalisation to
-    harder airways, the grades agents trained on marked."""
-    fig, ax = plt.subplots(figsize=(7.5, 4.6))
-    names = list(dict.fromkeys(s["policy"] for s in summaries if s["scene"] in dict(graded).values()))
-    for i, name in enumerate(names):
-        cells = {s["scene"]: s["normalized_score"] for s in summaries if s["policy"] == name}
-        grades = [g for g, scene in graded if scene in cells]
-        mean = np.array([cells[GRADED_SCENES[g]]["mean"] for g in grades])
-        low = mean - np.array([cells[GRADED_SCENES[g]]["ci_low"] for g in grades])
-        high = np.array([cells[GRADED_SCENES[g]]["ci_high"] for g in grades]) - mean
-        offset = (i - (len(names) - 1) / 2) * 0.04         # side by side where they agree
-        ax.errorbar(np.array(grades) + offset, mean, yerr=[low, high], fmt="o-", ms=4, capsize=2, label=name)
+    harder airways, the grades agents trained on shaded; the right panel zooms on the policies above 50."""
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharex=True)
+    scenes = dict(graded)
+    names = list(dict.fromkeys(s["policy"] for s in summaries if s["scene"] in scenes.values()))
+    colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
+    markers = "osD^v<>ph*"
     grade_of = {scene: g for g, scene in GRADED_SCENES.items()}
-    for scene in plan.train_on:
-        ax.axvspan(grade_of[scene] - 0.3, grade_of[scene] + 0.3, color="0.92", zorder=0)
-    ax.set_xticks([g for g, _ in graded])
-    ax.set_xlabel("airway grade (shaded: the grades agents trained on)")
-    ax.set_ylabel("normalized score (0 no force, 100 the oracle)")
-    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
+    lowest = 100.0
+    for ax, zoom in zip(axes, (False, True)):
+        for i, name in enumerate(names):
+            cells = {s["scene"]: s["normalized_score"] for s in summaries if s["policy"] == name}
+            grades = [g for g, scene in graded if scene in cells]
+            score = [cells[scenes[g]] for g in grades]
+            mean = np.array([c["mean"] for c in score])
+            if zoom and mean.min() < 50:
+                continue
+            lowest = min(lowest, min(c["ci_low"] for c in score)) if zoom else lowest
+            offset = (i - (len(names) - 1) / 2) * 0.02           # side by side where they agree
+            ax.errorbar(np.array(grades) + offset, mean, yerr=[mean - [c["ci_low"] for c in score],
+                                                               [c["ci_high"] for c in score] - mean],
+                        fmt=markers[i % len(markers)] + "-", color=colours[i], ms=4, capsize=2, lw=1, label=name)
+        for scene in plan.train_on:
+            ax.axvspan(grade_of[scene] - 0.3, grade_of[scene] + 0.3, color="0.92", zorder=0)
+        ax.set_xticks([g for g, _ in graded])
+        ax.set_xlabel("airway grade (shaded: the grades agents trained on)")
+    axes[0].set_ylabel("normalized score (0 no force, 100 the oracle)")
+    axes[0].set_title("every policy", fontsize=8)
+    axes[1].set_ylim(max(50.0, lowest - 2.0), 101.0)
+    axes[1].set_title("the policies above 50, closer", fontsize=8)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center right", fontsize=7, frameon=False)
     _suptitle(fig, "score against airway grade (mean, 95 % interval)", command)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 0.83, 1))
     return fig
 
 
