@@ -19,6 +19,9 @@ from softenv.fem.scene_data import FERequest, FESceneData
 from softenv.fem.store import scene_data, shipped_file
 
 FEM = {"tissue": {"model": "fem"}}
+# the ids on the FE tongue: every id but the graded airways, whose 60 N device range lies beyond the shipped
+# FE data (made for 40 N) and where some FE ramps do not converge (docs/airways.md: analytic tongue only)
+FE_IDS = {env_id: scene for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items() if env_id != "SoftSphereAirway-v0"}
 
 
 def default_request(**sections) -> FERequest:
@@ -33,8 +36,9 @@ def shipped() -> FESceneData:
 
 
 def test_every_default_scene_id_finds_the_shipped_fe_data():
-    for env_id, scene in {**ENV_SCENES, **HAPTIC_SCENES}.items():
+    for env_id, scene in FE_IDS.items():
         assert shipped_file(fe_request(scene_config(scene, FEM))) is not None, env_id
+    assert set(ENV_SCENES) | set(HAPTIC_SCENES) == set(FE_IDS) | {"SoftSphereAirway-v0"}     # it alone left out
 
 
 def test_shipped_data_hold_the_workspace_the_held_out_solves_and_a_rising_contact_curve(shipped):
@@ -138,7 +142,7 @@ def test_the_rbf_interpolates_its_samples_and_reproduces_a_linear_field_exactly(
         RBFResponse().fit(np.vstack([x, x[:1]]), np.vstack([y, y[:1]]))
 
 
-@pytest.mark.parametrize("env_id", sorted({**ENV_SCENES, **HAPTIC_SCENES}))
+@pytest.mark.parametrize("env_id", sorted(FE_IDS))
 def test_every_id_runs_on_fe_tissue_and_single_and_batched_envs_agree(env_id):
     env = gym.make(env_id, **FEM)
     venv = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", **FEM)
