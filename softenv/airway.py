@@ -71,9 +71,12 @@ def airway(section: Mapping[str, Any]) -> Airway:
     return Airway(grade, *(float(section[k]) if section[k] is not None else v for k, v in zip(SETTINGS, values)))
 
 
+NORMAL_AIRWAY: dict[str, Any] = {"grade": 1, **{k: None for k in SETTINGS}}     # the section's defaults
+
+
 def tongue_only(section: Mapping[str, Any]) -> dict[str, Any]:
     """A normal airway with this section's tongue: what a scene's tongue, shape model and response depend on."""
-    return {"grade": 1, **{k: None for k in SETTINGS}, "tongue_stiffness": airway(section).tongue_stiffness}
+    return {**NORMAL_AIRWAY, "tongue_stiffness": airway(section).tongue_stiffness}
 
 
 def target_ranges(task: Mapping[str, Any], section: Mapping[str, Any]) -> dict[str, tuple[float, float]]:

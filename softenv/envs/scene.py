@@ -30,7 +30,7 @@ from ..geometry import SphereMesh, make_mesh
 from ..response import ExactResponse, RBFResponse, ResponseModel, TabulatedResponse, make_response, tabulate
 from ..shape_model import ShapeModel
 from ..tissue import AnalyticTissue, TissueParams
-from ..airway import tongue_only
+from ..airway import NORMAL_AIRWAY, tongue_only
 from .config import config_key, material, scene_material
 from ..sections import SceneConfig
 
@@ -154,13 +154,14 @@ def build_scene(config: SceneConfig, progress: bool = False) -> Scene:
         key += hashlib.sha256(data.forces.tobytes() + data.shapes.tobytes()).hexdigest()
     # an analytic tongue of any stiffness shares the normal tongue's shape model, so a target shape has the
     # same b on every airway grade (the linear tongue's deformations only scale with it: the same span)
-    normal = fe is None and tissue.E != material(t)[0]
-    shapes_key = config_key({**config, **box, "airway": tongue_only({**config["airway"], "tongue_stiffness": 1.0})},
-                            ("tissue", "mesh", "shape_model", "response", "device")) if normal else key
+    normal_E = material(t)[0]
+    stiffened = fe is None and tissue.E != normal_E
+    shapes_key = config_key({**config, **box, "airway": NORMAL_AIRWAY},
+                            ("tissue", "mesh", "shape_model", "response", "device")) if stiffened else key
 
     def fit() -> ShapeModel:
-        shapes = workspace_dataset(workspace, layout, mesh, replace(tissue, E=material(t)[0]), n_contacts=sm_cfg["n_contacts"],
-                                   n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"]).shapes if normal else data.shapes
+        shapes = workspace_dataset(workspace, layout, mesh, replace(tissue, E=normal_E), n_contacts=sm_cfg["n_contacts"],
+                                   n_loads=sm_cfg["n_loads"], seed=sm_cfg["seed"]).shapes if stiffened else data.shapes
         return ShapeModel(sm_cfg["n_components"]).fit(shapes, mesh)
 
     shape_model = _cache.cached("shape-model", {"data": shapes_key}, fit,
