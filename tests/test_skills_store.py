@@ -230,6 +230,27 @@ def test_the_export_has_a_row_a_session_with_parts_and_clinical_metrics(tmp_path
     assert scene_name("force-command log", {}) == "SoftSphere-v0"
 
 
+def test_a_session_on_an_airway_grade_is_kept_under_that_grade_and_gets_its_own_pass_mark(tmp_path):
+    from softenv.envs import airway_scene
+    from softenv.skills.passmark import contrasting_groups
+    from softenv.training.hand import haptic_config
+    from softenv.training.logs import HAND_LOG, save_log
+    from softenv.training.trainee import expert_hand_log
+
+    assert scene_name(HAND_LOG.name, airway_scene(3)) == "SoftSphereAirway-v0 grade 3"
+    custom = {**airway_scene(3), "airway": {"grade": 3, "mouth_opening": 2.0}}
+    assert scene_name(HAND_LOG.name, custom).startswith("SoftSphereHaptic-v0 {")   # other settings: its sections
+    path = tmp_path / "graded.csv"
+    save_log(expert_hand_log(haptic_config(airway_scene(3))), path, HAND_LOG, scene=airway_scene(3))
+    with Store(tmp_path / "lab.sqlite") as store:
+        store.add(path, "T-9")
+        session = store.sessions("T-9")[0]
+        assert session.scene == "SoftSphereAirway-v0 grade 3" and session.report["airway"]["grade"] == 3
+        mark = contrasting_groups(session.scene, session.report["scene"], per_group=3)
+        normal = contrasting_groups("SoftSphereHaptic-v0", None, per_group=3)
+        assert mark.scene == "SoftSphereAirway-v0 grade 3" and mark.mark != normal.mark
+
+
 def test_score_and_play_keep_their_sessions(url, tmp_path, capsys):
     assert main(["score", "--example", "device_logs/levers_on_teeth", "--trainee", "T-3", "--store", url]) == 0
     assert "kept as session 1 of trainee T-3" in capsys.readouterr().out

@@ -44,6 +44,8 @@ from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.engine import Connection, Engine
 
 from .. import __version__
+from ..airway import GRADES
+from ..envs import airway_scene
 from ..training import scoring
 from ..training.logs import HAND_LOG, MAX_FILE_BYTES
 from . import schema
@@ -67,8 +69,12 @@ def database_url(store: str | Path) -> str:
 
 def scene_name(log_kind: str, sections: dict[str, Any]) -> str:
     """How the store names a scene: the log's id (SoftSphereHaptic-v0 for hand poses, SoftSphere-v0 for
-    force commands), then its sections as compact JSON when it has any."""
+    force commands), then its sections as compact JSON when it has any; a hand-pose log on an airway grade
+    as the grade (``SoftSphereAirway-v0 grade 3``)."""
     base = "SoftSphereHaptic-v0" if log_kind == HAND_LOG.name else "SoftSphere-v0"
+    graded = [g for g in GRADES if sections == airway_scene(g)] if log_kind == HAND_LOG.name else []
+    if graded:
+        return f"SoftSphereAirway-v0 grade {graded[0]}"
     return base if not sections else f"{base} {json.dumps(sections, sort_keys=True, separators=(',', ':'))}"
 
 
