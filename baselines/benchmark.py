@@ -133,9 +133,9 @@ def check_names(plan: Plan) -> None:
     for name in plan.train_on:
         if name not in plan.scenes:
             raise ValueError(f"agents train on {name!r}, which is not among the plan's scenes {plan.scenes}")
-        if any(a not in ALGOS for a in plan.agents):
-            raise ValueError(f"agents evaluated on other scenes than their own must be SB3 agents {list(ALGOS)}, "
-                             f"got {plan.agents}")
+    if plan.train_on and any(a not in ALGOS for a in plan.agents):
+        raise ValueError(f"agents evaluated on other scenes than their own must be SB3 agents {list(ALGOS)}, "
+                         f"got {plan.agents}")
 
 
 def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
@@ -190,10 +190,8 @@ def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None
     """Train one agent (or load it, when ``run_dir`` holds its finished run) and evaluate it; also returns
     its learning curve (test-target return against env steps), so the driver needs no access to the
     worker's files."""
-    _torch_single_thread()
-    path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
-    agent = load_agent(path, scene)
-    return evaluate(agent, scene, episodes), learning_curve(Path(run_dir))
+    evaluated, curve = transfer_job(algo, scene, seed, run_dir, budget, episodes, (scene,))
+    return evaluated[0], curve
 
 
 def transfer_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,

@@ -376,15 +376,14 @@ def cmd_play(args: argparse.Namespace) -> None:
         raise ValueError(f"--bridge and --device {args.device} both drive the hand: give one")
     store = open_store(args)                         # before the session, for the same reason
     scene = airway_scene(args.grade) if args.grade is not None else None
-    config = haptic_config(scene)                    # the device's workspace is the session's airway's
     bridge = device = None
-    if args.bridge is not None:
+    if args.bridge is not None:                      # a device is held to the session's airway's workspace
         host, port = args.bridge
-        bridge = play.open_bridge(host, port, config)
+        bridge = play.open_bridge(host, port, haptic_config(scene))
         host, port = bridge.address
         print(f"softenv play: waiting for a device's poses on udp://{host}:{port} (softenv.haptics.bridge)")
     elif args.device != "keys":
-        device = play.open_haptic_device(args.device, config)
+        device = play.open_haptic_device(args.device, haptic_config(scene))
     try:
         session = play.run(args.seconds, args.out, scene, bridge=bridge, device=device, screens=not args.headless)
         if store is not None:

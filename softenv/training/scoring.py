@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from ..airway import SETTINGS, airway, scene_title, target_ranges
+from ..airway import GRADES, SETTINGS, airway, scene_title, target_ranges
 from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
@@ -108,7 +108,7 @@ def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
     gain = report["points_to_gain"]
     worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
     patient = report.get("airway") or {}
-    graded = bool(patient) and patient["title"] != "SoftSphereHaptic-v0"
+    graded = bool(patient) and tuple(patient["settings"].values()) != GRADES[1][1:]
     return [ADVICE[k].format(safe_force=report["safe_force_N"])
             + (" " + AIRWAY_ADVICE[k].format(**patient["settings"], target_force=patient["target_force_N"])
                if graded and k in AIRWAY_ADVICE else "") for k in worst]
