@@ -49,7 +49,7 @@ from softenv.airway import GRADES, grade_table  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs import airway_scene  # noqa: E402
 from softenv.skills.passmark import crossing, group_amounts, profile_amounts  # noqa: E402
-from softenv.training.hand import haptic_config  # noqa: E402
+from softenv.training.hand import hand_limits, haptic_config  # noqa: E402
 from softenv.training.scoring import HAND_WEIGHTS, replay_hand, score_hand_log  # noqa: E402
 from softenv.training.trainee import degrade, expert_hand_log, skill_population  # noqa: E402
 
@@ -297,9 +297,11 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         "What moves them: speed, smoothness and view are measured against the grade's own expert, so they do not "
         "fall by themselves; safety is absolute (a harder airway needs more force, above the safe limit); the teeth "
         "sit closer over the blade, so levering costs the teeth part sooner; and each profile is rebuilt on each "
-        "grade to the published ratios to that grade's expert, as far as the device's "
-        f"{haptic_config(airway_scene(last))['device']['max_normal_force']:g} N lets a novice press harder than that "
-        "expert (the ratio of peak tongue forces above). The parts, group by group (means):\n",
+        "grade to the published ratios to that grade's expert, as far as the hand's workspace lets a novice press "
+        "harder than that expert: its floor (a level blade above the tongue's centre, "
+        f"{-1e3 * hand_limits(haptic_config(airway_scene(last)))['hand_z_m'][0]:g} mm below the start) stops the "
+        "novice's overshoot on every grade, and on a harder airway the expert's own press lies nearer that floor, so "
+        "the novice overshoots less (the ratio of peak tongue forces above). The parts, group by group (means):\n",
         "| grade | group | " + " | ".join(PARTS) + " |", "|---|---|" + "---|" * len(PARTS),
         *[f"| {k} | {g} | " + " | ".join(f"{result['parts'][k][g][p]:.2f}" for p in PARTS) + " |"
           for k in grades for g in GROUPS], "",

@@ -24,7 +24,7 @@ from ..fem.params import FE_POISSON
 from ..fem.scene_data import RAMP_STEPS
 from ..response import REGRESSORS
 from ..sections import SceneConfig
-from ..tissue import BLADE_PATCH_RADIUS_M, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
+from ..tissue import BLADE_PATCH_RADIUS_M, DESIGN_INDENTATION, TONGUE_POISSON, TONGUE_RADIUS_M, effective_modulus
 
 
 class UnknownSectionError(TypeError, ValueError):
@@ -112,7 +112,8 @@ SCHEMA: dict[str, dict[str, Field]] = {
     "tissue": {
         "model": Field("analytic", "", "analytic | fem", _choice("analytic", "fem"),
                        "analytic (Boussinesq/Cerruti patch, tabulated) or the finite-element tongue (neo-Hookean, "
-                       "nearly incompressible; its data ship for the default scene, others are generated: fem extra)"),
+                       "nearly incompressible; its data ship for the default scene, others are generated: fem extra; "
+                       "device.max_normal_force may indent it by at most 0.4 of its radius, where its ramps are verified)"),
         "law": Field("linear", "", "linear | stiffening", _choice("linear", "stiffening"),
                      "analytic model: linear (the paper's regime) or Fung stiffening with Hertzian contact widening"),
         "E": Field(None, "Pa", "[1e-3, 1e12] | None", _optional(_real(1e-3, 1e12)),
@@ -319,7 +320,7 @@ def validate_config(config: Mapping[str, Any]) -> SceneConfig:
                          f"{design:.2g} of its radius; at least {MIN_DESIGN_INDENTATION:g} is needed to resolve the "
                          "deformations: lower tissue.E or raise device.max_normal_force")
     if t["model"] == "fem":
-        _check_fem(cast(SceneConfig, out))
+        _check_fem(cast(SceneConfig, out), design)
     if task["target_normal_force"] == (0.0, 0.0) and task["target_sideways_force"] == (0.0, 0.0):
         raise ValueError("task.target_normal_force and task.target_sideways_force are both (0, 0): every target "
                          "would be the rest shape; give the target family a force")
@@ -353,9 +354,16 @@ def scene_material(config: Mapping[str, Any]) -> tuple[float, float]:
     return material(config["tissue"], airway(config["airway"]).tongue_stiffness)
 
 
-def _check_fem(config: SceneConfig) -> None:
-    """The limits of the finite-element tongue (softenv.fem.params.FEParams) and of its data's ramps."""
+def _check_fem(config: SceneConfig, design: float) -> None:
+    """The limits of the finite-element tongue (softenv.fem.params.FEParams) and of its data's ramps; ``design``
+    is the device's largest force's indentation over the radius (linear law)."""
     t, n_loads = config["tissue"], config["shape_model"]["n_loads"]
+    if design > DESIGN_INDENTATION * (1 + 1e-9):
+        force = config["device"]["max_normal_force"]
+        raise ValueError(f"device.max_normal_force={force:g} N indents the FE tongue by {design:.3g} of its radius "
+                         f"(linear law); the FE ramps are verified up to {DESIGN_INDENTATION:g} (the design force on "
+                         f"the default mesh; beyond it Newton may lose the solution): lower the force to at most "
+                         f"{force * DESIGN_INDENTATION / design:.4g} N, stiffen the tongue, or use the analytic tongue")
     if t["law"] != "linear":
         raise ValueError(f"tissue.law={t['law']!r} applies to tissue.model='analytic' only; the FE tongue is "
                          "neo-Hookean (its nonlinearity is its own): leave tissue.law at 'linear'")
