@@ -1,6 +1,7 @@
 """The finite-element tongue against closed forms: homogeneous neo-Hookean stretch, Hooke's law in the
 small-strain limit, equilibrium of the base with the load, mesh convergence, and refused solves."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -221,3 +222,14 @@ def test_an_fe_scenes_data_regenerate_bit_for_bit_and_its_curve_is_the_patch_cen
     depth = -tongue.displacements_at(solution.displacements, top[None])[:, 0, 2]
     np.testing.assert_allclose(data.curve_depths, depth, rtol=1e-12)
     np.testing.assert_allclose(data.curve_loads, [20 / 3, 40 / 3, 20.0])
+
+
+def test_a_tongue_s_times_as_stiff_deforms_under_a_force_as_the_tongue_under_that_force_over_s():
+    """What the torch twin's ``tissue_stiffness`` rests on for the FE tongue: its neo-Hookean energy is
+    proportional to E at a fixed Poisson ratio, so the solve at (F, s E) is the solve at (F / s, E)."""
+    force, contact, s = np.array([5.0, -2.0, -30.0]), np.array([0.3, 0.1, 1.0]), 1.6
+    base = FEParams(cells_per_side=2)
+    stiff = FETongue(dataclasses.replace(base, E=base.E * s)).solve(contact, force, steps=2)
+    scaled = FETongue(base).solve(contact, force / s, steps=2)
+    np.testing.assert_allclose(stiff.displacements[-1], scaled.displacements[-1], rtol=0,
+                               atol=1e-7 * np.abs(scaled.displacements[-1]).max())

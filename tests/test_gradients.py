@@ -9,6 +9,8 @@ import pytest
 import torch
 
 import softenv  # noqa: F401  (registers the ids)
+from softenv.geometry import latlong_mesh
+from softenv.tissue import AnalyticTissue, TissueParams
 
 RELATIVE_BOUND = 1e-6     # central differences at step 1e-6 in float64 agree to ~1e-8 of the gradient's scale
 
@@ -155,3 +157,87 @@ def test_track_state_refuses_a_plain_twin_and_a_twin_not_yet_reset():
                          differentiable=True)
     with pytest.raises(RuntimeError, match="call reset\\(\\) before track_state\\(\\)"):
         fresh.unwrapped.track_state()
+
+
+PARAM_CASES = {
+    "ideal, stiffness, reach": ("SoftSphere-v0", 20, "tissue_stiffness", {}),
+    "ideal, stiffness, stiffening law, creep": ("SoftSphereViscoelastic-v0", 20, "tissue_stiffness",
+                                                {"tissue": {"law": "stiffening"}}),
+    "ideal, target, procedure": ("SoftSphereProcedure-v0", 20, "target_shift", {}),
+    "laryngoscope, target": ("SoftSphereHaptic-v0", 30, "target_shift", {}),
+}
+PARAM_BASE = {"tissue_stiffness": 1.3, "target_shift": 0.0}    # a stiffer tongue keeps its forces in the table
+
+
+@pytest.mark.parametrize("case", PARAM_CASES, ids=list(PARAM_CASES))
+def test_scene_parameter_gradients_match_central_differences(case):
+    """``track_params()``: at their start values the step is the plain twin's bit for bit; the episode's summed
+    reward has gradients to the scene parameters, which agree with central differences of a parameter moved
+    in place (as track_params' docstring offers)."""
+    env_id, steps, name, scene = PARAM_CASES[case]
+    actions = _actions(steps, 2, 6, 0.6 if "Haptic" in env_id else 0.0)
+    plain, _ = _rollout(env_id, actions, False, **scene)
+    env = gym.make_vec(f"softenv:{env_id}", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                       differentiable=True, **scene)
+    params = env.unwrapped.track_params()
+    env.reset(seed=0)
+    assert torch.equal(torch.stack([env.step(a)[1] for a in actions]).detach(), plain)
+    leaf = params[name]
+
+    def episode(moved: tuple[tuple[int, ...], float] | None = None) -> torch.Tensor:
+        with torch.no_grad():
+            leaf.fill_(PARAM_BASE[name])
+            if moved is not None:
+                leaf[moved[0]] += moved[1]
+        env.reset(seed=0)
+        return torch.stack([env.step(a)[1] for a in actions]).sum()
+
+    leaf.grad = None
+    episode().backward()
+    grad = leaf.grad.clone()
+    assert grad.abs().sum() > 0
+    scale = grad.abs().max().item()
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        i = tuple(int(rng.integers(d)) for d in grad.shape)
+        with torch.no_grad():
+            fd = (episode((i, 1e-6)) - episode((i, -1e-6))) / 2e-6
+        assert abs(grad[i].item() - fd.item()) <= RELATIVE_BOUND * scale + 1e-9, (i, grad[i].item(), fd.item())
+
+
+@pytest.mark.parametrize("law", ["linear", "stiffening"])
+def test_a_tongue_s_times_as_stiff_deforms_under_a_force_as_the_scenes_under_that_force_over_s(law):
+    """What ``tissue_stiffness`` rests on, checked on the analytic tissue itself (saturation included: the
+    largest load indents beyond its linear share)."""
+    mesh = latlong_mesh(12)
+    rng = np.random.default_rng(3)
+    contacts = rng.normal(size=(6, 3))
+    contacts = 0.03 * contacts / np.linalg.norm(contacts, axis=1, keepdims=True)
+    forces = rng.normal(size=(6, 3)) * 20.0 - 40.0 * contacts / 0.03
+    forces[0] = -3000.0 * contacts[0] / 0.03           # one load deep in saturation (either law)
+    base = TissueParams(law=law)
+    for s in (0.7, 1.6):
+        stiff = AnalyticTissue(mesh, TissueParams(law=law, E=base.E * s)).displacements(contacts, forces)
+        scaled = AnalyticTissue(mesh, base).displacements(contacts, forces / s)
+        np.testing.assert_allclose(stiff, scaled, rtol=1e-12, atol=1e-15)
+    assert AnalyticTissue(mesh, base).amplitudes(contacts, forces / 0.7)["normal_saturation"].min() < 1.0
+
+
+def test_track_params_refuses_a_plain_twin_a_parameter_the_device_lacks_and_a_modulus_not_above_0():
+    plain = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch")
+    with pytest.raises(ValueError, match="track_params\\(\\) needs differentiable=True"):
+        plain.unwrapped.track_params()
+    haptic = gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                          backend="torch", differentiable=True)
+    with pytest.raises(ValueError, match="names contains 'tissue_stiffness': on device.kind='laryngoscope' the scene "
+                                         "parameters are \\['target_shift'\\]"):
+        haptic.unwrapped.track_params(("tissue_stiffness",))
+    assert list(haptic.unwrapped.track_params()) == ["target_shift"]
+    env = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
+                       differentiable=True)
+    stiffness = env.unwrapped.track_params(("tissue_stiffness",))["tissue_stiffness"]
+    env.reset(seed=0)
+    with torch.no_grad():
+        stiffness[1] = 0.0
+    with pytest.raises(ValueError, match="tissue_stiffness\\[1\\] = 0.0: a modulus factor must be > 0"):
+        env.step(torch.zeros(2, 4, dtype=torch.float64))

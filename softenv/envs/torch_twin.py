@@ -53,6 +53,8 @@ from .._torch_ops import TorchOps
 from .torch_parts import DeviceEpisodes, HostEpisodes, keep, sum_dtype
 from .world import World
 
+# the scene parameters track_params() offers, and the device kinds that have each
+SCENE_PARAMETERS = {"tissue_stiffness": ("ideal",), "target_shift": ("ideal", "laryngoscope")}
 _GRAPH_MODES = ("reduce-overhead", "max-autotune")     # torch.compile modes that record CUDA graphs themselves
 
 
@@ -156,6 +158,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
                 raise ValueError(f"device.kind={world.config['device']['kind']!r} has no differentiable() (see "
                                  "softenv.devices.base.DeviceTensors): its tensor form cannot carry gradients")
             self._device.differentiable()
+        self._stiffness: torch.Tensor | None = None        # scene parameters held as leaves (track_params)
+        self._target_shift: torch.Tensor | None = None
+        self._high = t(table.high_)
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
         self._z, self._b = t(np.empty((n, k))), t(np.empty((n, k)))
@@ -203,7 +208,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             self._started, self._clock = True, 0
         self._start(chosen)
         self._autoreset &= ~chosen
-        obs = self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev)
+        obs = self._observe(self._b, self._shifted(self._episodes.first()), self._device_obs(), self._prev)
         if mask is not None:                     # the others' observations are those their last step returned
             obs = _where_rows(chosen, obs, self._last_obs)
         if self.autoreset_mode == AutoresetMode.DISABLED:
@@ -271,6 +276,64 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         device = self._device.track_state()
         return {"z": self._z, "prev_action": self._prev, **{f"device.{name}": x for name, x in device.items()}}
 
+    def track_params(self, names: tuple[str, ...] | None = None) -> dict[str, torch.Tensor]:
+        """Hold scene parameters as leaves of autograd's graph (``differentiable=True``) and return them by
+        name (``names``: those of :data:`SCENE_PARAMETERS` this scene's device has; None: all of them):
+
+        * ``tissue_stiffness`` ``(n,)``: each env's tongue modulus over the scene's (1 at first). The
+          tissue's response depends on the force only through ``F / E`` (both laws, the FE tongue's
+          neo-Hookean energy at a fixed Poisson ratio), so the scene at ``s E`` under ``F`` is the scene
+          under ``F / s``: the step looks the response up at the forces over ``s`` (the ideal device only:
+          on the laryngoscope the contact law and the coupling read the modulus inside Warp's kernel,
+          whose constants are not on its tape). Forces beyond the response table's range (``s < 1``) are
+          held at its edge, where the gradient is 0. Targets stay the shapes they are.
+        * ``target_shift`` ``(n, k)``: added to every step's target shape parameters (0 at first): the
+          reward, its reference distance and the observation follow the shifted target; the normalized
+          score's anchors stay the drawn target's.
+
+        They stay across ``reset()`` and ``detach()`` (they are not state); a later ``backward()``
+        leaves each one's gradient in its ``.grad``, and moving one in place under ``torch.no_grad()``
+        moves the scene (a finite difference)."""
+        if not self.differentiable:
+            raise ValueError("track_params() needs differentiable=True (make_vec(..., backend='torch', differentiable=True))")
+        kind = self.world.device_kind.name
+        offered = tuple(name for name, kinds in SCENE_PARAMETERS.items() if kind in kinds)
+        for name in names if names is not None else ():
+            if name not in offered:
+                raise ValueError(f"names contains {name!r}: on device.kind={kind!r} the scene parameters are "
+                                 f"{list(offered)}; see SCENE_PARAMETERS")
+        chosen = offered if names is None else tuple(names)
+        out = {}
+        if "tissue_stiffness" in chosen:
+            self._stiffness = out["tissue_stiffness"] = torch.ones(
+                self.num_envs, dtype=self.dtype, device=self.torch_device, requires_grad=True)
+        if "target_shift" in chosen:
+            self._target_shift = out["target_shift"] = torch.zeros(
+                self.num_envs, self.world.k, dtype=self.dtype, device=self.torch_device, requires_grad=True)
+        return out
+
+    def _stiffened(self, f: torch.Tensor) -> torch.Tensor:
+        """The force features at which a tongue ``tissue_stiffness`` times as stiff responds as the scene's."""
+        s = self._stiffness
+        assert s is not None
+        if not bool((s > 0).all()):
+            i = int((~(s > 0)).nonzero()[0, 0])
+            raise ValueError(f"tissue_stiffness[{i}] = {float(s[i].detach())!r}: a modulus factor must be > 0")
+        forces = f[:, 2:] / s[:, None]
+        forces = torch.minimum(torch.maximum(forces, self._low[2:]), self._high[2:])
+        return torch.cat([f[:, :2], forces], dim=-1)
+
+    def _shifted_references(self, target: torch.Tensor, sq_ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The shifted target and its reference distance ``max(|b* - b_rest|^2, floor)``, moved from the
+        episode's by the shift's change, so that a shift of 0 leaves it as it was bit for bit."""
+        shifted, floor = self._shifted(target), self.world.floor_sq
+        before, after = (torch.sum((x - self._b_rest) ** 2, dim=-1) for x in (target, shifted))
+        moved = torch.where(before >= floor, sq_ref + (after - before), after)
+        return shifted, torch.where(after >= floor, moved, torch.full_like(sq_ref, floor))
+
+    def _shifted(self, target: torch.Tensor) -> torch.Tensor:
+        return target if self._target_shift is None else target + self._target_shift
+
     # -- the step -------------------------------------------------------------------------------
 
     def _checked(self, actions: Any) -> torch.Tensor:
@@ -323,7 +386,9 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         w = self.world
         target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
         f, normal, sideways = self._device.act(a, stepped)
-        g = self._response(f)
+        g = self._response(f if self._stiffness is None else self._stiffened(f))
+        if self._target_shift is not None:
+            target, sq_ref = self._shifted_references(target, sq_ref)
         z = self._z.clone() if w.dynamics.stateful else self._z     # step advances the creep state in place
         b = w.dynamics.step(z, g)
         d = b - target
@@ -360,7 +425,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             reward = shape + (force_term + smooth + extra)
             values["reward_shape"] = shape
         else:
-            obs = self._observe(self._b, upcoming, device_obs, self._prev)
+            obs = self._observe(self._b, self._shifted(upcoming), device_obs, self._prev)
         return obs, torch.where(s, reward, torch.zeros_like(reward)), terminated, truncated, values
 
     def _goal_shape_term(self, achieved: torch.Tensor, desired: torch.Tensor) -> torch.Tensor:
@@ -394,7 +459,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         self._t = keep(mask, torch.zeros_like(self._t), self._t)
         self._agent_cum = keep(mask, torch.zeros_like(self._agent_cum), self._agent_cum)
         self._peak = keep(mask, torch.zeros_like(self._peak), self._peak)
-        self._last_target = keep(rows, self._episodes.first(), self._last_target)
+        self._last_target = keep(rows, self._shifted(self._episodes.first()), self._last_target)
 
     def _episodes_may_start(self) -> bool:
         """Whether an env can start an episode this step. Without success termination every episode lasts
@@ -412,7 +477,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         if not may_start or not self._episodes.restart(mask):
             return obs
         self._start(mask)
-        return _where_rows(mask, self._observe(self._b, self._episodes.first(), self._device_obs(), self._prev), obs)
+        return _where_rows(mask, self._observe(self._b, self._shifted(self._episodes.first()), self._device_obs(),
+                                               self._prev), obs)
 
 
 DEVICE_CALLS = ("reset", "act", "observation", "report")     # what a step calls of its device
