@@ -165,8 +165,12 @@ PARAM_CASES = {
                                                 {"tissue": {"law": "stiffening"}}),
     "ideal, target, procedure": ("SoftSphereProcedure-v0", 20, "target_shift", {}),
     "laryngoscope, target": ("SoftSphereHaptic-v0", 30, "target_shift", {}),
+    "laryngoscope, tongue stiffness": ("SoftSphereHaptic-v0", 30, "tissue_stiffness", {}),
+    "laryngoscope, coupling stiffness": ("SoftSphereHaptic-v0", 30, "coupling_stiffness", {}),
+    "laryngoscope, coupling damping": ("SoftSphereHaptic-v0", 30, "coupling_damping", {}),
 }
-PARAM_BASE = {"tissue_stiffness": 1.3, "target_shift": 0.0}    # a stiffer tongue keeps its forces in the table
+# where the differences are taken: a stiffer tongue keeps its forces in the table
+PARAM_BASE = {"tissue_stiffness": 1.3, "target_shift": 0.0, "coupling_stiffness": 0.9, "coupling_damping": 1.2}
 
 
 @pytest.mark.parametrize("case", PARAM_CASES, ids=list(PARAM_CASES))
@@ -223,18 +227,19 @@ def test_a_tongue_s_times_as_stiff_deforms_under_a_force_as_the_scenes_under_tha
     assert AnalyticTissue(mesh, base).amplitudes(contacts, forces / 0.7)["normal_saturation"].min() < 1.0
 
 
-def test_track_params_refuses_a_plain_twin_a_parameter_the_device_lacks_and_a_modulus_not_above_0():
+def test_track_params_refuses_a_plain_twin_a_parameter_the_device_lacks_and_a_modulus_not_above_0_and_names_each_devices():
     plain = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch")
     with pytest.raises(ValueError, match="track_params\\(\\) needs differentiable=True"):
         plain.unwrapped.track_params()
     haptic = gym.make_vec("softenv:SoftSphereHaptic-v0", num_envs=2, vectorization_mode="vector_entry_point",
                           backend="torch", differentiable=True)
-    with pytest.raises(ValueError, match="names contains 'tissue_stiffness': on device.kind='laryngoscope' the scene "
-                                         "parameters are \\['target_shift'\\]"):
-        haptic.unwrapped.track_params(("tissue_stiffness",))
-    assert list(haptic.unwrapped.track_params()) == ["target_shift"]
+    assert list(haptic.unwrapped.track_params()) == ["target_shift", "coupling_stiffness", "coupling_damping",
+                                                     "tissue_stiffness"]
     env = gym.make_vec("softenv:SoftSphere-v0", num_envs=2, vectorization_mode="vector_entry_point", backend="torch",
                        differentiable=True)
+    with pytest.raises(ValueError, match="names contains 'coupling_stiffness': on device.kind='ideal' the scene "
+                                         "parameters are \\['target_shift', 'tissue_stiffness'\\]"):
+        env.unwrapped.track_params(("coupling_stiffness",))
     stiffness = env.unwrapped.track_params(("tissue_stiffness",))["tissue_stiffness"]
     env.reset(seed=0)
     with torch.no_grad():

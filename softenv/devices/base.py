@@ -202,6 +202,18 @@ class DeviceTensors(DeviceNames, Protocol):
         :meth:`differentiable`) and return them by name; a device with no state returns ``{}``."""
         ...
 
+    @property
+    def scene_params(self) -> tuple[str, ...]:
+        """The scene parameters (the twin's ``track_params()`` names: factors on the scene's values) whose
+        effect on this device its step carries; a device on which the tissue's modulus acts only through
+        the response (the twin's own lookup) names ``"tissue_stiffness"`` with nothing to do for it."""
+        ...
+
+    def use_params(self, params: dict[str, Any]) -> None:
+        """The twin's ``track_params()``: the leaves of :attr:`scene_params` it tracks (``(n,)`` factors, by
+        name), which every later :meth:`act` reads."""
+        ...
+
 
 @dataclass(frozen=True)
 class DeviceKind:

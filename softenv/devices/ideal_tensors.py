@@ -18,6 +18,7 @@ class IdealDeviceTensors:
     obs_names = IDEAL_OBS
     info_keys: tuple[str, ...] = ()
     episode_info_keys: tuple[str, ...] = ()
+    scene_params: tuple[str, ...] = ("tissue_stiffness",)     # the force is commanded: the tissue acts through the response only
 
     def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
                  dtype: torch.dtype) -> None:
@@ -53,3 +54,6 @@ class IdealDeviceTensors:
     def track_state(self) -> dict[str, torch.Tensor]:
         """No state of its own."""
         return {}
+
+    def use_params(self, params: dict[str, torch.Tensor]) -> None:
+        """Nothing of the device reads them."""

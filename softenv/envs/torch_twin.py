@@ -53,8 +53,6 @@ from .._torch_ops import TorchOps
 from .torch_parts import DeviceEpisodes, HostEpisodes, keep, sum_dtype
 from .world import World
 
-# the scene parameters track_params() offers, and the device kinds that have each
-SCENE_PARAMETERS = {"tissue_stiffness": ("ideal",), "target_shift": ("ideal", "laryngoscope")}
 _GRAPH_MODES = ("reduce-overhead", "max-autotune")     # torch.compile modes that record CUDA graphs themselves
 
 
@@ -278,39 +276,44 @@ class SoftSphereTorchVectorEnv(VectorEnv):
 
     def track_params(self, names: tuple[str, ...] | None = None) -> dict[str, torch.Tensor]:
         """Hold scene parameters as leaves of autograd's graph (``differentiable=True``) and return them by
-        name (``names``: those of :data:`SCENE_PARAMETERS` this scene's device has; None: all of them):
+        name (``names``: those this scene has, :meth:`scene_params`; None: all of them). Each is a factor on
+        the scene's own value, 1 at first, or a shift, 0 at first:
 
-        * ``tissue_stiffness`` ``(n,)``: each env's tongue modulus over the scene's (1 at first). The
-          tissue's response depends on the force only through ``F / E`` (both laws, the FE tongue's
-          neo-Hookean energy at a fixed Poisson ratio), so the scene at ``s E`` under ``F`` is the scene
-          under ``F / s``: the step looks the response up at the forces over ``s`` (the ideal device only:
-          on the laryngoscope the contact law and the coupling read the modulus inside Warp's kernel,
-          whose constants are not on its tape). Forces beyond the response table's range (``s < 1``) are
-          held at its edge, where the gradient is 0. Targets stay the shapes they are.
-        * ``target_shift`` ``(n, k)``: added to every step's target shape parameters (0 at first): the
-          reward, its reference distance and the observation follow the shifted target; the normalized
-          score's anchors stay the drawn target's.
+        * ``tissue_stiffness`` ``(n,)``: each env's tongue modulus over the scene's. The tissue's response
+          depends on the force only through ``F / E`` (both laws, the FE tongue's neo-Hookean energy at a
+          fixed Poisson ratio), so the step looks the response up at the forces over the factor; forces beyond
+          the response table's range (a factor below 1) are held at its edge, where the gradient is 0. On the
+          laryngoscope the tongue's contact law and lateral grip take the factor too. Targets stay the
+          shapes they are.
+        * ``coupling_stiffness``, ``coupling_damping`` ``(n,)`` (laryngoscope): the hand-blade coupling's
+          translational stiffness and damping over the scene's.
+        * ``target_shift`` ``(n, k)``: added to every step's target shape parameters: the reward, its
+          reference distance and the observation follow the shifted target; the normalized score's anchors
+          stay the drawn target's.
 
-        They stay across ``reset()`` and ``detach()`` (they are not state); a later ``backward()``
-        leaves each one's gradient in its ``.grad``, and moving one in place under ``torch.no_grad()``
-        moves the scene (a finite difference)."""
+        They stay across ``reset()`` and ``detach()`` (they are not state); a later ``backward()`` leaves
+        each one's gradient in its ``.grad``, and moving one in place under ``torch.no_grad()`` moves the
+        scene (a finite difference). At their start values the step is the plain twin's bit for bit."""
         if not self.differentiable:
             raise ValueError("track_params() needs differentiable=True (make_vec(..., backend='torch', differentiable=True))")
-        kind = self.world.device_kind.name
-        offered = tuple(name for name, kinds in SCENE_PARAMETERS.items() if kind in kinds)
+        offered = self.scene_params()
         for name in names if names is not None else ():
             if name not in offered:
-                raise ValueError(f"names contains {name!r}: on device.kind={kind!r} the scene parameters are "
-                                 f"{list(offered)}; see SCENE_PARAMETERS")
-        chosen = offered if names is None else tuple(names)
+                raise ValueError(f"names contains {name!r}: on device.kind={self.world.device_kind.name!r} the scene "
+                                 f"parameters are {list(offered)}")
         out = {}
-        if "tissue_stiffness" in chosen:
-            self._stiffness = out["tissue_stiffness"] = torch.ones(
-                self.num_envs, dtype=self.dtype, device=self.torch_device, requires_grad=True)
-        if "target_shift" in chosen:
-            self._target_shift = out["target_shift"] = torch.zeros(
-                self.num_envs, self.world.k, dtype=self.dtype, device=self.torch_device, requires_grad=True)
+        for name in offered if names is None else names:
+            shape = (self.num_envs, self.world.k) if name == "target_shift" else (self.num_envs,)
+            start = torch.zeros if name == "target_shift" else torch.ones
+            out[name] = start(shape, dtype=self.dtype, device=self.torch_device).requires_grad_(True)
+        self._stiffness, self._target_shift = out.get("tissue_stiffness"), out.get("target_shift")
+        self._device.use_params({k: v for k, v in out.items() if k in self._device.scene_params})
         return out
+
+    def scene_params(self) -> tuple[str, ...]:
+        """The scene parameters :meth:`track_params` offers here: the target's shift, and those the device's
+        step carries (``DeviceTensors.scene_params``)."""
+        return ("target_shift", *self._device.scene_params)
 
     def _stiffened(self, f: torch.Tensor) -> torch.Tensor:
         """The force features at which a tongue ``tissue_stiffness`` times as stiff responds as the scene's."""

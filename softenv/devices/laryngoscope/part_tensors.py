@@ -49,6 +49,8 @@ class LaryngoscopeTensorPart:
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
     episode_info_keys: tuple[str, ...] = ()
+    # the scene parameters its kernel reads (warp_kernel.scene_row), in the columns of the engine's scene_params
+    scene_params: tuple[str, ...] = ("coupling_stiffness", "coupling_damping", "tissue_stiffness")
 
     def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
                  dtype: torch.dtype) -> None:
@@ -60,6 +62,7 @@ class LaryngoscopeTensorPart:
         self._rest = t(scene.rest_features)
         self._prev = torch.zeros(4, dtype=dtype, device=torch_device)
         self._weights = config["reward"].copy()
+        self._factors: dict[str, torch.Tensor] = {}
 
     def _use(self, engine: type[LaryngoscopeTensors], n: int, torch_device: torch.device) -> None:
         self.laryngoscopes = engine(*self._parts, n, torch_device)
@@ -72,6 +75,10 @@ class LaryngoscopeTensorPart:
 
     def act(self, actions: torch.Tensor, stepped: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         dev = self.laryngoscopes
+        if self._factors:                  # tracked scene parameters: the kernel's columns times their factors
+            ones = torch.ones(dev.n, dtype=torch.float64, device=dev.torch_device)
+            factors = [self._factors.get(name, ones).to(torch.float64) for name in self.scene_params]
+            dev.scene_params = self._scene_defaults * torch.stack(factors, dim=1)
         dev.control_step(actions.to(torch.float64), moving=stepped)
         features, touching = dev.features()
         f = in_workspace(features, touching, self._low, self._high, self._rest, dev.ops)
@@ -107,3 +114,9 @@ class LaryngoscopeTensorPart:
 
     def track_state(self) -> dict[str, torch.Tensor]:
         return self.laryngoscopes.track_state()
+
+    def use_params(self, params: dict[str, torch.Tensor]) -> None:
+        """The coupling's stiffness and damping and the tongue's stiffness (its load table and lateral grip)
+        as factors on the kernel's scene parameters (the Warp engine's, which :meth:`differentiable` sets)."""
+        self._scene_defaults = self.laryngoscopes.scene_params.detach().clone()
+        self._factors = {name: x for name, x in params.items() if name in self.scene_params}

@@ -52,6 +52,12 @@ def device_params(c: Constants, s: IncisorContact, params: LaryngoscopeParams) -
     return p
 
 
+def scene_defaults(params: LaryngoscopeParams, n: int) -> np.ndarray:
+    """The scene parameters ``(n, 3)`` each device's launch reads (:func:`.warp_kernel.scene_row`) as the
+    scene sets them: the coupling's stiffness and damping, and the tongue's stiffness factor 1."""
+    return np.tile([params.coupling_stiffness, params.coupling_damping, 1.0], (n, 1)).astype(np.float64)
+
+
 def kernel_constants(dev: KernelLaryngoscopes, device: Any) -> list[Any]:
     """What every launch for the devices ``dev`` reads, on Warp's ``device``: the constants, the tongue's
     load table and the blade's polygon (:func:`control_period`'s and :func:`one_substep`'s last arguments)."""
@@ -75,8 +81,9 @@ class LaryngoscopeWarp(KernelLaryngoscopes):
         self._blade, self._hand, self._lateral, self._hand_v, self._contact, self._incisor = (x.numpy() for x in state)
         actions = wp.zeros((n, 4), dtype=f64, device="cpu")
         self._actions = actions.numpy()
+        scene: Any = wp.array(scene_defaults(params, n), dtype=f64, device="cpu")
         self._launch = wp.launch(control_period, n, device="cpu", record_cmd=True,
-                                 inputs=[*state, actions, self.n_substeps, *kernel_constants(self, "cpu")])
+                                 inputs=[*state, actions, scene, self.n_substeps, *kernel_constants(self, "cpu")])
 
     def control_step(self, actions: Any, moving: Any = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold

@@ -477,11 +477,14 @@ def action_of(actions: wp.array2d(dtype=f64), i: int) -> wp.vec4d:
 
 
 @wp.func
-def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64),
-            local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
+def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.array(dtype=f64),
+            slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
     """One substep of one device: the hand's clipped velocity, the tongue's force, then Chipmunk's step of
-    the coupled blade against the incisors (``cpSpaceStep``)."""
+    the coupled blade against the incisors (``cpSpaceStep``). ``tune`` is the device's row of the scene
+    parameters (:func:`scene_row`): the coupling's stiffness and damping, and the factor on the tongue's
+    stiffness (its load table and lateral grip)."""
     h = p.h
+    k_c, c_c, s_t = tune[0], tune[1], tune[2]
     m_inv, i_inv = p.inv_m, p.inv_I
     px, py, a, ca, sa, vx, vy, w = f64(d.px), f64(d.py), f64(d.a), f64(d.ca), f64(d.sa), f64(d.vx), f64(d.vy), f64(d.w)
     gx, gy, pitch = f64(d.gx), f64(d.gy), f64(d.pitch)
@@ -512,16 +515,16 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         rn = rx * ny - ry * nx
         inv_meff = p.inv_m + rn * rn * p.inv_I
         i = table_index(max0(depth) * p.inv_step, p.top)
-        slope = slopes[i]
-        law = loads[i] + (depth - f64(i) * p.step) * slope
-        ahead = slopes[table_index(max0(depth + h * approach) * p.inv_step, p.top)]
+        slope = s_t * slopes[i]
+        law = s_t * loads[i] + (depth - f64(i) * p.step) * slope
+        ahead = s_t * slopes[table_index(max0(depth + h * approach) * p.inv_step, p.top)]
         if ahead > slope:
             slope = ahead
         excess = max0(slope - p.k_ref)
         stiff = excess * h + TWO * root(excess / inv_meff)
         qx, qy = ca * p.grip[0] - sa * p.grip[1], sa * p.grip[0] + ca * p.grip[1]
-        Fx = p.k * (gx - px - qx) + p.c * (hvx - vx + w * qy)
-        Fy = p.k * (gy - py - qy) + p.c * (hvy - vy - w * qx)
+        Fx = k_c * (gx - px - qx) + c_c * (hvx - vx + w * qy)
+        Fy = k_c * (gy - py - qy) + c_c * (hvy - vy - w * qx)
         tau = qx * Fy - qy * Fx + p.k_rot * (pitch - a) + p.c_rot * (hw - w)
         push = -(Fx * nx + Fy * ny) * p.inv_m - tau * rn * p.inv_I
         beta = stiff * h * inv_meff
@@ -529,15 +532,16 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         fx = P * nx
         fy = P * ny
         torque = rx * fy - ry * fx
-    k_s = p.k_t * f64(on_tongue)
-    lat_v = (lat_v + p.h_over_m * (p.k * (hand_lat - lat_y) + p.c * hl - k_s * (lat_y - anchor))) / \
-        (ONE + p.h_over_m * p.c)
+    k_t = s_t * p.k_t
+    k_s = k_t * f64(on_tongue)
+    lat_v = (lat_v + p.h_over_m * (k_c * (hand_lat - lat_y) + c_c * hl - k_s * (lat_y - anchor))) / \
+        (ONE + p.h_over_m * c_c)
     lat_y = lat_y + h * lat_v
     stuck = k_s * (lat_y - anchor)
     Q = clip(stuck, -(p.mu * P), p.mu * P)
     if on_tongue:
         if Q != stuck:
-            anchor = lat_y - Q / p.k_t
+            anchor = lat_y - Q / k_t
     else:
         anchor = lat_y
     # cpSpaceStep: 1. positions, spending the contact's bias velocities
@@ -610,13 +614,13 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
         nx, ny = sdx * inv, sdy * inv
         rcn = gqx * ny - gqy * nx
         kk = m_inv + i_inv * rcn * rcn
-        j = (f64(SPRING_LENGTH) - sdist) * p.k * h
+        j = (f64(SPRING_LENGTH) - sdist) * k_c * h
         vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
         w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
         spring_r1x, spring_r1y = put(spring_r1x, s, r1x), put(spring_r1y, s, r1y)
         spring_nx, spring_ny = put(spring_nx, s, nx), put(spring_ny, s, ny)
         spring_mass = put(spring_mass, s, ONE / kk)
-        spring_coef = put(spring_coef, s, ONE - wp.exp(-p.c * h * kk))
+        spring_coef = put(spring_coef, s, ONE - wp.exp(-c_c * h * kk))
         spring_j = put(spring_j, s, j)
     j_rot = ((pitch - a) - ZERO) * p.k_rot * h
     w = w + j_rot * i_inv
@@ -726,6 +730,13 @@ def substep(d: Device, p: Params, command: wp.vec4d, loads: wp.array(dtype=f64),
 
 
 @wp.func
+def scene_row(scene: wp.array2d(dtype=f64), i: int) -> wp.vec3d:
+    """Device ``i``'s scene parameters: the coupling's stiffness (N/m) and damping (N s/m), and the factor on
+    the tongue's stiffness (1: the scene's)."""
+    return wp.vec3d(scene[i, 0], scene[i, 1], scene[i, 2])
+
+
+@wp.func
 def start(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
           i: int) -> Device:
     """Device ``i`` at the start of a control period: no arbiter, no bias velocity, no impulse yet."""
@@ -782,16 +793,19 @@ def finish(d: Device, count: int, p: Params, blade: wp.array2d(dtype=f64), hand:
 @wp.kernel(enable_backward=False, module="unique", module_options={"optimization_level": 3, "fuse_fp": False})
 def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
                    hand_v: wp.array2d(dtype=f64), contact: wp.array2d(dtype=f64), incisor: wp.array(dtype=f64),
-                   actions: wp.array2d(dtype=f64), count: int, p: Params, loads: wp.array(dtype=f64),
+                   actions: wp.array2d(dtype=f64), scene: wp.array2d(dtype=f64), count: int, p: Params,
+                   loads: wp.array(dtype=f64),
                    slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
                    local_normals: wp.array(dtype=wp.vec2d)):
     """``count`` substeps of device ``i`` (its rows of the state arrays, updated in place), its hand
-    commanded by ``actions[i]`` (normalised, in the hand's frame at the period's start)."""
+    commanded by ``actions[i]`` (normalised, in the hand's frame at the period's start), with its row of
+    ``scene`` (:func:`scene_row`)."""
     i = wp.tid()
     d = start(blade, hand, lateral, i)
     order = hand_command(action_of(actions, i), d.pitch, p)
+    tune = scene_row(scene, i)
     for _ in range(count):
-        d = substep(d, p, order, loads, slopes, local, local_normals)
+        d = substep(d, p, tune, order, loads, slopes, local, local_normals)
     finish(d, count, p, blade, hand, lateral, hand_v, contact, incisor, i)
 
 
@@ -817,10 +831,10 @@ def close_period(devices: wp.array(dtype=Device), count: int, p: Params, blade: 
 
 
 @wp.kernel(module="unique", module_options={"fuse_fp": False})
-def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d), p: Params,
-                loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
+def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d), scene: wp.array2d(dtype=f64),
+                p: Params, loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
                 local_normals: wp.array(dtype=wp.vec2d), after: wp.array(dtype=Device)):
     """One substep of device ``i`` from ``before`` into ``after``: a launch a substep, so that a
     :class:`warp.Tape` keeps every intermediate state for the adjoint."""
     i = wp.tid()
-    after[i] = substep(before[i], p, command[i], loads, slopes, local, local_normals)
+    after[i] = substep(before[i], p, scene_row(scene, i), command[i], loads, slopes, local, local_normals)

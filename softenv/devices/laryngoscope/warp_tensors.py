@@ -13,7 +13,7 @@ import warp as wp
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
 from .tensors import LaryngoscopeTensors
-from .warp_arrays import kernel_constants
+from .warp_arrays import kernel_constants, scene_defaults
 from .warp_kernel import Device, close_period, control_period, f64, one_substep, open_period
 
 
@@ -30,6 +30,7 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
         super().__init__(params, contact, n, torch_device)
         self._warp_device = wp.device_from_torch(self.torch_device)
         self._constants = kernel_constants(self, self._warp_device)
+        self.scene_params = self._array(scene_defaults(params, n))     # (n, 3): scene_row's; a taped step may track it
 
     def control_step(self, actions: Any, moving: Any = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
@@ -37,14 +38,16 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
         if moving is not None:
             actions = torch.where(moving[:, None], actions, 0.0)
         if self.taped:
-            period = differentiable_rollout(self, self._blade, self._hand, self._lateral, actions[None])
+            period = differentiable_rollout(self, self._blade, self._hand, self._lateral, actions[None],
+                                            self.scene_params)
             for field, name in HELD_AS.items():
                 setattr(self, name, period[field][0])
             self._forget()
             return
         arrays = [wp.from_torch(x, dtype=f64) for x in (self._blade, self._hand, self._lateral, self._hand_v,
                                                          self._contact, self._incisor,
-                                                         actions.to(torch.float64).contiguous())]
+                                                         actions.to(torch.float64).contiguous(),
+                                                         self.scene_params.detach().contiguous())]
         stream = wp.stream_from_torch(self.torch_device) if self.torch_device.type == "cuda" else None
         wp.launch(control_period, self.n, inputs=[*arrays, self.n_substeps, *self._constants],
                   device=self._warp_device, stream=stream)
@@ -65,7 +68,7 @@ class _Rollout(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: Any, engine: LaryngoscopeWarpTensors, blade: torch.Tensor, hand: torch.Tensor,
-                lateral: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+                lateral: torch.Tensor, actions: torch.Tensor, scene: torch.Tensor) -> tuple[torch.Tensor, ...]:
         device, n, count = engine._warp_device, engine.n, engine.n_substeps
 
         def held(x: torch.Tensor) -> Any:
@@ -76,6 +79,7 @@ class _Rollout(torch.autograd.Function):
 
         inputs = [held(blade), held(hand), held(lateral)]
         orders = [held(a) for a in actions]
+        tune = held(scene)
         state = inputs
         outputs: list[list[Any]] = []
         tape = wp.Tape()
@@ -86,13 +90,13 @@ class _Rollout(torch.autograd.Function):
                 wp.launch(open_period, n, inputs=[*state, order, engine._constants[0], d, command], device=device)
                 for _ in range(count):
                     after = wp.zeros(n, dtype=Device, device=device, requires_grad=True)
-                    wp.launch(one_substep, n, inputs=[d, command, *engine._constants, after], device=device)
+                    wp.launch(one_substep, n, inputs=[d, command, tune, *engine._constants, after], device=device)
                     d = after
                 period = [fresh(width) for width in ROLLOUT_FIELDS.values()]
                 wp.launch(close_period, n, inputs=[d, count, engine._constants[0], *period], device=device)
                 outputs.append(period)
                 state = period[:3]
-        ctx.tape, ctx.inputs, ctx.orders, ctx.outputs = tape, inputs, orders, outputs
+        ctx.tape, ctx.inputs, ctx.orders, ctx.tune, ctx.outputs = tape, inputs, orders, tune, outputs
         return tuple(torch.stack([wp.to_torch(period[k]) for period in outputs]) for k in range(len(ROLLOUT_FIELDS)))
 
     @staticmethod
@@ -102,18 +106,21 @@ class _Rollout(torch.autograd.Function):
         ctx.tape.backward(grads=seeds)
         blade, hand, lateral = (wp.to_torch(x.grad).clone() for x in ctx.inputs)
         actions = torch.stack([wp.to_torch(x.grad).clone() for x in ctx.orders])
+        scene = wp.to_torch(ctx.tune.grad).clone()
         ctx.tape.zero()
-        return None, blade, hand, lateral, actions
+        return None, blade, hand, lateral, actions, scene
 
 
 def differentiable_rollout(engine: LaryngoscopeWarpTensors, blade: torch.Tensor, hand: torch.Tensor,
-                           lateral: torch.Tensor, actions: torch.Tensor) -> dict[str, torch.Tensor]:
+                           lateral: torch.Tensor, actions: torch.Tensor,
+                           scene: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Control periods of the Warp kernel from the state ``blade`` ``(n, 6)``, ``hand`` ``(n, 3)`` and
     ``lateral`` ``(n, 4)`` (as :class:`~.state.DeviceState` holds them), with ``actions`` ``(T, n, 4)``
     (normalised, as :meth:`control_step` takes them), as torch autograd sees it: each period's state
     ``(T, n, ...)`` by :data:`ROLLOUT_FIELDS` name, whose gradients reach the start state and the actions
-    through Warp's adjoint of every substep. It leaves
+    through Warp's adjoint of every substep, and to ``scene`` ``(n, 3)`` (the scene parameters of
+    :func:`~.warp_kernel.scene_row`; None: the engine's). It leaves
     ``engine``'s own state as it was. Through the incisors' contact and the clamps (workspace, friction
     cone, the tongue's load table) the gradient is that of the branch each substep took."""
-    out = _Rollout.apply(engine, blade, hand, lateral, actions)
+    out = _Rollout.apply(engine, blade, hand, lateral, actions, engine.scene_params if scene is None else scene)
     return dict(zip(ROLLOUT_FIELDS, out))
