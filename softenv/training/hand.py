@@ -11,6 +11,7 @@ config, ``None`` meaning SoftSphereHaptic-v0's own."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any, cast
 
 import numpy as np
@@ -166,6 +167,14 @@ def action_toward(env: Any, goal: np.ndarray, tol: float = 1e-3) -> np.ndarray:
         v = (goal - now) / dt
         action = np.clip(hand_action(v[0], v[1], v[2], v[3], now[2], p), -1.0, 1.0)
     return action.astype(np.float32)
+
+
+def steer(env: Any, poses: np.ndarray) -> Iterator[tuple[np.ndarray, dict[str, Any]]]:
+    """Step ``env``'s hand along ``poses`` ``(K + 1, 4)`` (relative; the first where it is), each control
+    period toward the next (:func:`action_toward`): yields each action and the step's info."""
+    for k in range(len(poses) - 1):
+        action = action_toward(env, poses[k + 1])
+        yield action, env.step(action)[4]
 
 
 def pose_after(env: Any, action: np.ndarray) -> np.ndarray:

@@ -38,7 +38,7 @@ from .._validation import check_choice, check_int, check_real, printable
 from ..envs.config import check_config, make_config, scene_sections
 from ..envs.scene import degrees_to_features
 from ..sections import SceneConfig
-from .hand import action_toward, hand_actions, hand_config, haptic_config, reach_env
+from .hand import hand_actions, hand_config, haptic_config, reach_env, steer
 from .logs import (FORCE_LOG, HAND_LOG, MAX_DURATION_S, Schema, check_limits, check_table, read_log, read_scene,
                    save_log)
 from .trainee import expert_hand_log
@@ -222,8 +222,7 @@ def replay_hand(table: np.ndarray, config: SceneConfig | None = None, source: st
     env.reset(seed=0, options={"target": _family_centre(env.world)})
     error, force, incisor = np.empty(len(times)), np.empty(len(times)), np.empty(len(times))
     frames: list[np.ndarray] = []
-    for k in range(len(times)):                       # the log's own moves passed at 1e-6: 1e-3 is rounding
-        _, _, _, _, info = env.step(action_toward(env, poses[k + 1]))
+    for k, (_, info) in enumerate(steer(env, poses)):
         error[k], force[k], incisor[k] = info["shape_error_mm"], info["tongue_force_N"], info["incisor_force_N"]
         _keep_frame(env, k, len(times), frame_every, frames)
     return _replay(env, times, error, force, math.nan, incisor_N=incisor, clinical=info["clinical"], frames=frames)
