@@ -126,14 +126,16 @@ class Identification:
 
 def identify(actions: np.ndarray, measured: np.ndarray, noise: Sequence[float], config: SceneConfig | None = None,
              names: Sequence[str] = PARAMETERS, channels: Sequence[str] = CHANNELS, iterations: int = 150,
-             lr: float = 0.05) -> Identification:
+             lr: float = 0.05, newton: int = 2) -> Identification:
     """Fit ``names`` (factors on the scene's values, from 1) to the readings ``measured`` ``(K, n, C)`` of
     ``channels`` in ``n`` sessions replayed by ``actions`` ``(K, n, 4)`` (:func:`log_actions`): weighted least
     squares (each channel's residual over its ``noise``), by ``iterations`` of Adam (learning rate ``lr``) on
-    the parameters' logarithms; error bars as the module docstring says."""
+    the parameters' logarithms, then ``newton`` Newton steps on the loss's Hessian (none along a direction it
+    does not curve); error bars as the module docstring says."""
     config, channels = hand_config(config), _channels(channels)
     check_int(iterations, "iterations", 1, 100_000)
     check_real(lr, "lr", 0.0, 10.0, low_open=True)
+    check_int(newton, "newton", 0, 100)
     a = torch.as_tensor(check_array(actions, "actions", ndim=(3,)), dtype=torch.float64)
     y = torch.as_tensor(check_array(measured, "measured", ndim=(3,)), dtype=torch.float64)
     if tuple(y.shape) != (a.shape[0], a.shape[1], len(channels)):
@@ -153,7 +155,14 @@ def identify(actions: np.ndarray, measured: np.ndarray, noise: Sequence[float], 
         theta.grad = grad
         optimizer.step()
         losses.append(float(loss.sum()))
-    fitted = theta.detach()
+    fitted = theta.detach().clone()
+    for _ in range(newton):                  # Adam's last steps jitter: Newton's converge where the loss curves
+        hessian = fit.hessian(fitted)
+        w, v = torch.linalg.eigh(hessian)
+        inverse = torch.where(w > 1e-6 * w.max(dim=-1, keepdim=True).values, 1.0 / w, 0.0)   # flat directions: no step
+        step = (v * inverse[:, None, :]) @ v.transpose(1, 2) @ fit(fitted)[1].T[:, :, None]
+        fitted -= step[:, :, 0].T
+        losses.append(float(fit(fitted)[0].sum()))
     loss, _ = fit(fitted)
     cov = _covariance(fit.hessian(fitted))                                             # (n, p, p)
     sd = torch.sqrt(torch.diagonal(cov, dim1=1, dim2=2))                               # (n, p)
