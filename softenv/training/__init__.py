@@ -5,6 +5,7 @@
 * :mod:`.trainee` -- the scripted expert's hand log and synthetic trainees (graded errors of technique).
 * :mod:`.scoring` -- replay a log through its scene and score it against the expert (``softenv score``).
 * :mod:`.profiles` -- trainee profiles built to published clinical measurements, to check the score against.
+* :mod:`.identify` -- the tongue's and the coupling's stiffness fitted to a recorded session by gradients (torch).
 * :mod:`.play` -- a person at the keyboard and mouse, or a haptic device over the bridge (``softenv play``; the
   ``play`` extra).
 * :mod:`.bridge` -- the UDP bridge a haptic device's driver process drives a session through (poses in, force out).
