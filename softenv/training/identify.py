@@ -33,7 +33,7 @@ from .hand import hand_actions, hand_config, reach_env, steer
 
 PARAMETERS = ("tissue_stiffness", "coupling_stiffness", "coupling_damping")   # each a factor on the scene's
 # what a session's sensors measure each control period, from the step's info: the tongue's normal force (a
-# blade-mounted load cell) and the blade's height (a tracked marker: its centre of mass, relative to the start)
+# blade-mounted load cell) and the blade's height (a tracked marker on its centre of mass, zeroed at its first reading)
 CHANNELS = ("tongue_force_N", "blade_z_mm")
 
 
@@ -57,12 +57,12 @@ def measure(env: SoftSphereTorchVectorEnv, actions: torch.Tensor, channels: tupl
     """What ``channels`` (of :data:`CHANNELS`) read ``(K, n, C)`` at each control period of ``actions``
     ``(K, n, 4)`` from a reset."""
     env.reset(seed=0)
-    start = None
+    start: torch.Tensor | None = None
     readings = []
     for a in actions:
         info = env.step(a)[4]
         z = info["blade_pose"][:, 1]
-        start = z.detach() if start is None else start       # the marker's height relative to the first reading
+        start = z if start is None else start       # a marker zeroed at its first reading (its mount's offset unknown)
         values = {"tongue_force_N": info["tongue_force_N"], "blade_z_mm": (z - start) * 1e3}
         readings.append(torch.stack([values[c] for c in channels], dim=-1))
     return torch.stack(readings)
