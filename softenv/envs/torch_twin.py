@@ -307,13 +307,15 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             start = torch.zeros if name == "target_shift" else torch.ones
             out[name] = start(shape, dtype=self.dtype, device=self.torch_device).requires_grad_(True)
         self._stiffness, self._target_shift = out.get("tissue_stiffness"), out.get("target_shift")
-        self._device.use_params({k: v for k, v in out.items() if k in self._device.scene_params})
+        carried = self.scene_params()[1:]
+        if carried:
+            self._device.use_params({k: v for k, v in out.items() if k in carried})
         return out
 
     def scene_params(self) -> tuple[str, ...]:
         """The scene parameters :meth:`track_params` offers here: the target's shift, and those the device's
-        step carries (``DeviceTensors.scene_params``)."""
-        return ("target_shift", *self._device.scene_params)
+        step carries (``DeviceTensors.scene_params``; none for a kind written before the contract had it)."""
+        return ("target_shift", *getattr(self._device, "scene_params", ()))
 
     def _stiffened(self, f: torch.Tensor) -> torch.Tensor:
         """The force features at which a tongue ``tissue_stiffness`` times as stiff responds as the scene's."""
