@@ -18,7 +18,7 @@ sys.path.insert(0, str(DOCS.parent))
 import gymnasium as gym  # noqa: E402
 
 import softenv  # noqa: E402
-from softenv import leaderboard  # noqa: E402
+from softenv import leaderboard, provenance  # noqa: E402
 from softenv.airway import grade_table  # noqa: E402
 from softenv.envs import ENV_SCENES, HAPTIC_SCENES  # noqa: E402
 from softenv.envs.single import SoftSphereEnv  # noqa: E402
@@ -68,6 +68,9 @@ API = {
                    "softenv.stats.nested_interval", "softenv.stats.performance_profile",
                    "softenv.stats.profile_intervals", "softenv.stats.probability_of_improvement",
                    "softenv.stats.improvement_interval"],
+    "Provenance of results": ["softenv.provenance.check", "softenv.provenance.lock", "softenv.provenance.coverage",
+                              "softenv.provenance.read_manifest", "softenv.provenance.read_stamp",
+                              "softenv.provenance.Freshness", "softenv.provenance.table"],
     "Baselines and agents": ["softenv.baselines.agents.train_agent", "softenv.baselines.agents.load_agent",
                              "softenv.baselines.evaluate.evaluate", "softenv.baselines.evaluate.normalized_scores",
                              "softenv.baselines.benchmark.run"],
@@ -165,7 +168,7 @@ def leaderboard_page() -> str:
         leaderboard.aggregates_table(records),
         "![IQM and optimality gap across each device's scenes, and performance profiles of episode scores]"
         "(../../results/leaderboard_aggregates.png)\n",
-        "The figure: `softenv leaderboard aggregate --plot results/leaderboard_aggregates.png` over the same files "
+        "The figure: `softenv leaderboard aggregate --plot` over the same files, drawn by `scripts/make_leaderboard.py` "
         "(when it was last made: [every result](../results.md)).\n",
         "## By scene\n",
         leaderboard.table(records)])
@@ -182,6 +185,8 @@ def generate() -> None:
     (out / "airway_grades.inc").write_text(grade_table() + "\n")
     (out / "api.md").write_text(api_page())
     (out / "leaderboard.md").write_text(leaderboard_page())
+    results = DOCS.parent / "results"
+    (out / "freshness.inc").write_text(provenance.table(provenance.check(results, DOCS.parent)))
 
 
 generate()

@@ -28,6 +28,7 @@ from triton.backends.compiler import GPUTarget
 from triton.runtime import driver
 
 from softenv._artifact import write_text
+from softenv.bench.timing import code_revision
 from softenv.devices.laryngoscope import fused
 from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.envs import HAPTIC_SCENES
@@ -129,7 +130,7 @@ def main() -> None:
     command = "python scripts/fused_kernel_profile.py " + " ".join(sys.argv[1:])
     warps = kernel.metadata.num_warps
     lines = [f"# The fused laryngoscope kernel on sm_{args.capability}, compiled without a GPU", "",
-             f"Made by `{command.strip()}` (Triton {triton.__version__}): "
+             f"Made by `{command.strip()}` at {code_revision()} (Triton {triton.__version__}): "
              f"{args.scene}'s kernel, {fused.BLOCK} devices a program over {warps} warps (one thread a device), "
              f"no fused multiply-add.", "",
              f"ptxas: **{resources['registers']} registers** a thread, {resources['stack_bytes']} bytes of stack "

@@ -7,7 +7,8 @@ Agents train into ``--runs`` (``<runs>/<scene>/<algo>-<seed>``, the folders ``so
 compare run's agents are loaded, not trained again, and a stopped run resumes where it stopped).
 ``--quick``: the agents as ``softenv compare --quick`` trains them (one seed, its short budgets, on
 SoftSphere-v0 only; minutes); otherwise their YAML budgets over 5 seeds on SoftSphere-v0 and
-SoftSphereHaptic-v0 and 3 elsewhere (hours on 2 cores).
+SoftSphereHaptic-v0 and 3 elsewhere (hours on 2 cores). Then draws the aggregates across scenes of every
+file in ``--out`` (``softenv leaderboard aggregate --plot``'s figure) into ``--figure``.
 
     python scripts/make_leaderboard.py [--quick] [--scenes ...] [--agents ...] [--runs runs] [--jobs 2]
 """
@@ -58,6 +59,7 @@ def main() -> None:
     parser.add_argument("--agents", nargs="*", choices=list(ALGOS), default=list(ALGOS))
     parser.add_argument("--runs", default="runs", help="where agents train (softenv compare's run folders)")
     parser.add_argument("--out", type=Path, default=Path("results/leaderboard"))
+    parser.add_argument("--figure", type=Path, default=Path("results/leaderboard_aggregates.png"))
     parser.add_argument("--jobs", type=int, default=usable_cores())
     args = parser.parse_args()
     plan = quick_plan() if args.quick else full_plan()
@@ -99,6 +101,7 @@ def main() -> None:
         print(f"wrote {path}")
     if failed:
         raise SystemExit("failed: " + "; ".join(failed))
+    print(f"wrote {leaderboard.aggregates_figure(leaderboard.load_results(args.out), args.figure)}")
 
 
 if __name__ == "__main__":
