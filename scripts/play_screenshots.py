@@ -11,6 +11,7 @@ temporary folder.
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -49,9 +50,15 @@ def main() -> None:
             lines[name] = f"{name}.png: frame {frame} ({phase}); drawn: {', '.join(sorted(k for k in view.drawn if not k.startswith('control:')))}"
 
     ended = PRESS_END + 200
+    here = Path.cwd()
     with tempfile.TemporaryDirectory() as work:
-        session = play.run(seconds=4.0, out_dir=work, realtime=False, on_frame=on_frame, echo=lambda s: None,
-                           script=lambda f: SCRIPT.get(f, []) + ([key(pygame.K_RETURN)] if f == ended else []))
+        os.chdir(work)          # the end card names the report as a user's relative folder, not this machine's
+        try:
+            session = play.run(seconds=4.0, out_dir="sessions", realtime=False, on_frame=on_frame,
+                               echo=lambda s: None,
+                               script=lambda f: SCRIPT.get(f, []) + ([key(pygame.K_RETURN)] if f == ended else []))
+        finally:
+            os.chdir(here)
     for name, surface in shots.items():
         atomic_write(args.out / f"{name}.png", lambda fh, s=surface, n=name: pygame.image.save(s, fh, f"{n}.png"))
     score = session.report["score"]
