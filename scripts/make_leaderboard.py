@@ -6,8 +6,8 @@ commit; the docs' leaderboard page is built from these files.
 Agents train into ``--runs`` (``<runs>/<scene>/<algo>-<seed>``, the folders ``softenv compare`` uses, so a
 compare run's agents are loaded, not trained again, and a stopped run resumes where it stopped).
 ``--quick``: the agents as ``softenv compare --quick`` trains them (one seed, its short budgets, on
-SoftSphere-v0 only; minutes); otherwise their YAML budgets over 5 seeds on SoftSphere-v0 and
-SoftSphereHaptic-v0 and 3 elsewhere (hours on 2 cores). Then draws the aggregates across scenes of every
+SoftSphere-v0 only; minutes); otherwise their YAML budgets over the full profile's seeds
+(``benchmark.training_seeds``: 10 on the laryngoscope, 5 elsewhere; many hours on 2 cores). Then draws the aggregates across scenes of every
 file in ``--out`` (``softenv leaderboard aggregate --plot``'s figure) into ``--figure``.
 
     python scripts/make_leaderboard.py [--quick] [--scenes ...] [--agents ...] [--runs runs] [--jobs 2]

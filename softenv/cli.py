@@ -164,7 +164,7 @@ def compare_plan(args: argparse.Namespace) -> tuple[benchmark.Plan, str]:
             "graded": benchmark.graded_plan, "full": benchmark.full_plan}[profile]()
     if args.scenes:
         plan.scenes = args.scenes
-        plan.seeds = {s: plan.seeds.get(s, 5 if s in benchmark.FIVE_SEEDS else 3) for s in args.scenes}
+        plan.seeds = {s: plan.seeds.get(s, benchmark.training_seeds(s)) for s in args.scenes}
     if args.policies is not None:
         plan.baselines = args.policies
     if args.agents is not None:

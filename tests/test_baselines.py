@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from softenv.baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
-from softenv.baselines.benchmark import ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds, run, seed_label
+from softenv.baselines.benchmark import (ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds,
+                                        learning_curve, run, seed_label)
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.devices.laryngoscope.control import HandController
@@ -164,6 +165,10 @@ def test_compare_resumes_a_stopped_run_and_prints_the_same_table(tmp_path, monke
     assert np.mean([s["mean"] for s in seeds]) == pytest.approx(whole[2]["normalized_score"]["mean"], rel=1e-12)
     assert all(s["ci_low"] <= s["mean"] <= s["ci_high"] for s in seeds)
     assert whole[2]["runs"] == 2 and whole[0]["runs"] == 1          # the agent's cell knows its seeds
+    # every episode's score by run, so anyone can recount the cell, and the share above the planning oracle
+    by_run = np.array(whole[2]["episode_scores"])
+    assert by_run.shape == (2, 4) and [np.mean(r) for r in by_run] == pytest.approx([s["mean"] for s in seeds], abs=1e-4)
+    assert whole[2]["above_100"] == np.mean(by_run > 100 + 1e-6) and whole[0]["above_100"] == 0.0
     table = format_seeds(whole).splitlines()
     assert table[0] == "| scene | policy | seed 0 | seed 1 |" and table[2].startswith("| SoftSphere-v0 | sac | ")
     save = RunStore.save
@@ -388,11 +393,12 @@ def test_compare_profiles_name_their_scenes_seeds_budgets_and_report():
     haptic, stem = compare_plan(parser.parse_args(["compare", "--haptic"]))
     assert stem == "benchmark_haptic"
     assert haptic.scenes == ["SoftSphereHaptic-v0", "SoftSphereHapticProcedure-v0"]
-    assert haptic.seeds == {s: 3 for s in haptic.scenes} and haptic.timesteps == {}      # the YAML budgets
+    assert haptic.seeds == {s: 10 for s in haptic.scenes} and haptic.timesteps == {}     # the YAML budgets
     assert {"expert", "oracle", "zero"} <= set(haptic.baselines) and haptic.agents == ["ppo", "sac", "td3", "sac-her"]
     full, stem = compare_plan(parser.parse_args(["compare", "--scenes", "SoftSphereHapticProcedure-v0", "--agents"]))
     assert stem == "benchmark" and full.scenes == ["SoftSphereHapticProcedure-v0"] and full.agents == []
-    assert full.seeds == {"SoftSphereHapticProcedure-v0": 3}
+    assert full.seeds == {"SoftSphereHapticProcedure-v0": 10}
+    assert compare_plan(parser.parse_args(["compare"]))[0].seeds["SoftSphere-v0/stiffening"] == 5
     quick, stem = compare_plan(parser.parse_args(["compare", "--quick", "--episodes", "7"]))
     assert stem == "benchmark_quick" and quick.episodes == 7 and quick.timesteps["ppo"] == 50_000
     with pytest.raises(SystemExit):
@@ -404,3 +410,20 @@ def test_the_learning_curves_legend_counts_each_agents_seeds_as_its_panels_draw_
     assert seed_label("ppo", [5, 3, 3]) == "ppo (3-5 seeds)"
     assert seed_label("sac", [3, 3]) == "sac (3 seeds)"
     assert seed_label("td3", [1]) == "td3 (1 seed)"
+
+
+def test_the_report_carries_every_episode_and_the_learning_curves(tmp_path):
+    """The JSON holds each cell's per-episode scores by run and each agent's learning-curve points (the
+    markdown table counts the episodes above the planning oracle), so a reader can recount a cell or read a
+    curve without the figure."""
+    plan = Plan(["SoftSphere-v0"], ["zero", "oracle"], ["sac"], {"SoftSphere-v0": 1}, {"sac": 1100}, episodes=3)
+    run(plan, tmp_path, tmp_path / "runs", "test", echo=lambda s: None)
+    report = json.loads((tmp_path / "benchmark.json").read_text())
+    cells = {s["policy"]: s for s in report["summaries"]}
+    assert np.array(cells["sac"]["episode_scores"]).shape == (1, 3)
+    assert np.mean(cells["sac"]["episode_scores"]) == pytest.approx(cells["sac"]["normalized_score"]["mean"], abs=1e-4)
+    assert cells["oracle"]["episode_scores"] == [[100.0] * 3] and cells["oracle"]["above_100"] == 0.0
+    [curve] = report["learning_curves"]["SoftSphere-v0 sac"]
+    steps, returns = learning_curve(tmp_path / "runs" / "SoftSphere-v0" / "sac-0")
+    assert curve["env_steps"] == steps.tolist() and curve["test_return"] == np.round(returns, 4).tolist()
+    assert "| episodes above 100 (%) |" in (tmp_path / "benchmark.md").read_text()
