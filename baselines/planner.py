@@ -124,6 +124,7 @@ class TrajectoryOracle(ReplayPolicy):
         self.candidates, self.iterations, self.elites = candidates, iterations, elites
         self.knot_every, self.sigma, self.seed = knot_every, sigma, seed
         self.history: list[float] = []        # the mean best error sum after each iteration (mm x steps)
+        self.history_by_episode = np.zeros((0, 0))   # (iterations + 1, episodes): each episode's best so far
         self.elapsed: list[float] = []        # wall seconds since plan() began, at each entry of history
         self.decision_us = float("nan")       # planning wall time per decision of the plan
 
@@ -147,6 +148,7 @@ class TrajectoryOracle(ReplayPolicy):
         spread = np.full_like(mean, self.sigma)
         rollout_seeds = [episode for episode in seeds for _ in range(self.candidates)]
         self.history = [float(best_error.mean())]
+        by_episode = [best_error.copy()]
         self.elapsed = [time.perf_counter() - started]
         for _ in range(self.iterations):
             noise = np.stack([rng.standard_normal((self.candidates - 1, len(knots), 4)) for rng in rngs]) * spread[:, None]
@@ -164,7 +166,9 @@ class TrajectoryOracle(ReplayPolicy):
             mean = elite.mean(axis=1)
             spread = np.maximum(elite.std(axis=1), 0.02 * self.sigma)
             self.history.append(float(best_error.mean()))
+            by_episode.append(best_error.copy())
             self.elapsed.append(time.perf_counter() - started)
+        self.history_by_episode = np.stack(by_episode)
         self.actions = best_actions                  # the very actions whose rollouts scored best_error
         self.decision_us = (time.perf_counter() - started) / (n * horizon) * 1e6
         return best_error

@@ -43,6 +43,11 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     assert np.all(planned <= warm * (1 + 1e-9)) and planned.mean() < 0.97 * warm.mean()
     assert oracle.history[0] == pytest.approx(warm.mean()) and np.all(np.diff(oracle.history) <= 1e-9)
     assert len(oracle.elapsed) == len(oracle.history) == 5        # a wall time for each entry of the history
+    by_episode = oracle.history_by_episode                        # each episode's own budget curve
+    assert by_episode.shape == (5, 3) and np.all(np.diff(by_episode, axis=0) <= 0)
+    np.testing.assert_array_equal(by_episode[0], warm)
+    np.testing.assert_array_equal(by_episode[-1], planned)
+    np.testing.assert_allclose(by_episode.mean(axis=1), oracle.history, rtol=1e-12)
     measured = evaluate(oracle, SCENE, episodes=3)
     np.testing.assert_allclose(measured.values["error_sum_mm"], planned, rtol=1e-9)
     assert measured.decision_us == oracle.decision_us > 0       # the planner's own figure is carried, not re-timed
