@@ -85,8 +85,11 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
-                progress: bool = True, eval_episodes: int = 20, reuse: bool = True) -> Path:
+                progress: bool = True, eval_episodes: int = 20, reuse: bool = True,
+                overrides: dict[str, Any] | None = None) -> Path:
     """Train one agent from its seed into ``out_dir``; returns the path of its model (``model.zip``).
+    ``overrides`` replace YAML hyper-parameters (a tuner's trial: ``{"gamma": 0.99}``); they are part of
+    the run's settings, so a run made with others is not reused.
 
     The run is written into ``<out_dir>.partial`` and renamed to ``out_dir`` once whole, so ``out_dir``
     holds a finished run or nothing. With ``reuse``, a finished run of the same agent, seed, budget and
@@ -100,13 +103,18 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
 
     env_id = scene_kwargs(scene)[0]
     params = hyperparams(algo, env_id)
+    unknown = sorted(set(overrides or {}) - set(params) - {"n_envs"})
+    if unknown:
+        raise ValueError(f"overrides {unknown} are not hyper-parameters of {algo} on {env_id}; "
+                         f"those it has: {sorted(params)}")
+    params.update(overrides or {})
     n_envs = int(params.pop("n_envs", 1))
     budget = int(timesteps if timesteps is not None else params.pop("n_timesteps"))
     params.pop("n_timesteps", None)
     params.pop("env_kwargs", None)               # for the env (make_training_env), not the algorithm
     out = Path(out_dir)
     wanted = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-              **_layout(algo, scene)}
+              "overrides": dict(overrides or {}), **_layout(algo, scene)}
     if reuse and finished_run(out, wanted) is None:
         return out / "model.zip"
     partial = out.with_name(out.name + ".partial")
@@ -161,6 +169,7 @@ def finished_run(out: Path, wanted: dict[str, Any]) -> str | None:
         return f"agent.json is unreadable ({exc})"
     if not isinstance(meta, dict):
         return "agent.json is not a JSON object"
+    meta.setdefault("overrides", {})             # written before overrides existed: the YAML's settings
     other = {k: (meta.get(k), v) for k, v in wanted.items() if meta.get(k) != v}
     if other:
         return "made with other settings: " + ", ".join(f"{k}={a!r} (wanted {b!r})" for k, (a, b) in other.items())

@@ -131,6 +131,14 @@ def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(
     assert path.stat().st_mtime_ns == stamp
     train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
     assert json.loads((out / "agent.json").read_text())["timesteps"] == 1200
+    # a tuner's overrides are settings too: a run made with them is not the YAML's, and the other way round
+    tuned = train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False, overrides={"gamma": 0.9})
+    assert json.loads((out / "agent.json").read_text())["overrides"] == {"gamma": 0.9}
+    assert load_agent(tuned, "SoftSphere-v0").model.gamma == 0.9
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
+    assert json.loads((out / "agent.json").read_text())["overrides"] == {}
+    with pytest.raises(ValueError, match=r"overrides \['gama'\] are not hyper-parameters of sac"):
+        train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False, overrides={"gama": 0.9})
 
 
 def test_a_cell_of_several_seeds_resamples_the_seeds_then_their_episodes():

@@ -1,0 +1,126 @@
+"""Tune an agent's discount and learning rate with Optuna, on the training targets only.
+
+    python scripts/tune_agents.py --algo ppo --scene SoftSphereHaptic-v0 --trials 16 [--timesteps N]
+        [--seeds 0] [--episodes 50] [--runs runs/tuning] [--out results/tuning]
+
+Each trial trains the agent (``softenv.baselines.agents.train_agent``, its YAML settings with the trial's
+``gamma`` and ``learning_rate``) on every ``--seeds`` seed for ``--timesteps`` env steps (default: the
+YAML budget), and scores it by the mean summed shape error of its ``--episodes`` first training-target
+episodes (the score's ``E``; lower is better): the test targets the benchmark reports are never seen.
+Optuna's TPE sampler (seed 0) proposes ``gamma`` from 0.9 to 0.999 and ``learning_rate`` from 1e-5 to
+1e-3 (log scale); the first 5 trials sample at random. The study is an SQLite file in ``--runs``, so a
+stopped search resumes: ``--trials`` is the total wanted, finished trials are kept, one cut short is
+marked failed and run again as a new trial.
+
+Writes ``<scene>__<algo>.md`` (every trial), ``.json`` and ``.yml`` (the YAML entry with the best
+trial's values, to adopt into ``softenv/baselines/hyperparams``) into ``--out``; one BLAS and torch thread.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import optuna
+import torch
+import yaml
+
+from softenv._artifact import write_text
+from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent
+from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
+from softenv.bench import single_thread_environment, threads_pinned
+from softenv.bench.timing import code_revision
+
+GAMMAS = (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)
+LEARNING_RATES = (1e-5, 1e-3)
+
+
+def objective(trial: optuna.Trial, args: argparse.Namespace) -> float:
+    overrides = {"gamma": trial.suggest_categorical("gamma", GAMMAS),
+                 "learning_rate": trial.suggest_float("learning_rate", *LEARNING_RATES, log=True)}
+    errors = []
+    for seed in args.seeds:
+        run_dir = args.runs / args.scene.replace("/", "_") / f"{args.algo}-trial{trial.number}-seed{seed}"
+        model = train_agent(args.algo, args.scene, seed, run_dir, args.timesteps, progress=False, overrides=overrides)
+        played = evaluate(load_agent(model, args.scene), args.scene, args.episodes, list(range(args.episodes)),
+                          task={"split": "train"})
+        errors.append(float(played.values["error_sum_mm"].mean()))
+    trial.set_user_attr("error_by_seed", errors)
+    return sum(errors) / len(errors)
+
+
+def main() -> None:
+    if not threads_pinned():
+        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    torch.set_num_threads(1)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--algo", choices=list(ALGOS), required=True)
+    parser.add_argument("--scene", choices=list(SCENES), required=True)
+    parser.add_argument("--trials", type=int, required=True, help="total finished trials wanted")
+    parser.add_argument("--timesteps", type=int, default=None, help="env steps a trial trains (default: the YAML's)")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--episodes", type=int, default=50, help="training-target episodes a trial is scored on")
+    parser.add_argument("--runs", type=Path, default=Path("runs/tuning"))
+    parser.add_argument("--out", type=Path, default=Path("results/tuning"))
+    args = parser.parse_args()
+    for name in ("trials", "episodes"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} {getattr(args, name)}: must be >= 1")
+    env_id = scene_kwargs(args.scene)[0]
+    yaml_params = hyperparams(args.algo, env_id)
+    budget = args.timesteps or int(yaml_params["n_timesteps"])
+    command = "python scripts/tune_agents.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    args.runs.mkdir(parents=True, exist_ok=True)
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(
+        study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes}",
+        storage=f"sqlite:///{(args.runs / 'tuning.db').resolve()}", direction="minimize", load_if_exists=True,
+        sampler=optuna.samplers.TPESampler(seed=0, n_startup_trials=5))
+    for cut in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
+        study.tell(cut.number, state=optuna.trial.TrialState.FAIL)        # a run that was stopped
+    started = time.perf_counter()
+    while len(finished := study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))) < args.trials:
+        trial = study.ask()
+        began = time.perf_counter()
+        value = objective(trial, args)
+        trial.set_user_attr("seconds", time.perf_counter() - began)
+        study.tell(trial, value)
+        print(f"trial {trial.number}: gamma {trial.params['gamma']}, learning_rate {trial.params['learning_rate']:.3g}: "
+              f"mean error sum {value:.2f} mm-steps", flush=True)
+    best = study.best_trial
+    stem = f"{args.scene.replace('/', '_')}__{args.algo}"
+    tuned = {**{k: v for k, v in yaml_params.items() if k != "env_kwargs"}, **best.params,
+             "n_timesteps": int(yaml_params["n_timesteps"])}
+    header = (f"# Tuning {args.algo} on {args.scene}\n\nMade by `{command}` at {code_revision()} "
+              f"({(time.perf_counter() - started) / 60:.1f} min this call; {len(finished)} finished trials). "
+              f"Each trial trains {budget:,} env steps on seeds {args.seeds} and is scored by the mean summed shape "
+              f"error (mm-steps) of the first {args.episodes} training-target episodes; lower is better. "
+              f"Search: Optuna {optuna.__version__} TPE (seed 0, 5 random trials first), gamma in {list(GAMMAS)}, "
+              f"learning_rate log-uniform in {list(LEARNING_RATES)}. The YAML's values: gamma "
+              f"{yaml_params.get('gamma')}, learning_rate {yaml_params.get('learning_rate')}.\n")
+    rows = ["| trial | gamma | learning_rate | mean error sum | by seed | minutes |", "|---|---|---|---|---|---|"]
+    rows += [f"| {t.number} | {t.params['gamma']} | {t.params['learning_rate']:.3g} | {t.value:.2f} | "
+             f"{', '.join(f'{e:.2f}' for e in t.user_attrs['error_by_seed'])} | {t.user_attrs['seconds'] / 60:.1f} |"
+             for t in sorted(finished, key=lambda t: t.value)]
+    best_line = (f"\nBest: trial {best.number}, gamma {best.params['gamma']}, learning_rate "
+                 f"{best.params['learning_rate']:.3g} (mean error sum {best.value:.2f}); its YAML entry: `{stem}.yml`.\n")
+    write_text(args.out / f"{stem}.md", header + "\n" + "\n".join(rows) + "\n" + best_line)
+    record: dict[str, Any] = {"command": command, "commit": code_revision(), "timesteps": budget, "seeds": args.seeds,
+                              "episodes": args.episodes, "best": {"number": best.number, **best.params,
+                                                                   "value": best.value},
+                              "trials": [{"number": t.number, **t.params, "value": t.value, **t.user_attrs}
+                                         for t in finished]}
+    write_text(args.out / f"{stem}.json", json.dumps(record, indent=1))
+    write_text(args.out / f"{stem}.yml", f"# {command} at {code_revision()}: trial {best.number} of "
+               f"{len(finished)}\n" + yaml.safe_dump({env_id: tuned}, sort_keys=False))
+    print(f"wrote {args.out / stem}.md, .json and .yml")
+
+
+if __name__ == "__main__":
+    main()

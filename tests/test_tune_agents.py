@@ -1,0 +1,39 @@
+"""``scripts/tune_agents.py`` at its smallest: Optuna's trials train and score agents on the training
+targets, the search resumes from its study file, and the YAML it writes is the best trial's."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _tune(tmp_path: Path, trials: int) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "scripts/tune_agents.py", "--algo", "ppo", "--scene", "SoftSphere-v0",
+                           "--trials", str(trials), "--timesteps", "64", "--episodes", "3", "--runs",
+                           str(tmp_path / "runs"), "--out", str(tmp_path / "out")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=600)
+
+
+def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
+    first = _tune(tmp_path, 2)
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert first.stdout.count("trial ") == 2
+    again = _tune(tmp_path, 3)                     # one more trial; the two kept are not trained again
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert [line.split(":")[0] for line in again.stdout.splitlines() if line.startswith("trial ")] == ["trial 2"]
+    record = json.loads((tmp_path / "out" / "SoftSphere-v0__ppo.json").read_text())
+    assert len(record["trials"]) == 3
+    best = min(record["trials"], key=lambda t: t["value"])
+    assert record["best"]["number"] == best["number"]
+    entry = yaml.safe_load((tmp_path / "out" / "SoftSphere-v0__ppo.yml").read_text())["SoftSphere-v0"]
+    assert (entry["gamma"], entry["learning_rate"]) == (best["gamma"], best["learning_rate"])
+    assert 0.9 <= entry["gamma"] <= 0.999 and 1e-5 <= entry["learning_rate"] <= 1e-3
+    assert entry["n_timesteps"] == 300_000                   # the YAML's budget, not the search's
+    for trial in record["trials"]:                           # its score is its own agent's, on training targets
+        assert trial["value"] == sum(trial["error_by_seed"]) / len(trial["error_by_seed"]) > 0
