@@ -68,3 +68,16 @@ def test_a_small_demo_cohort_is_kept_with_its_pass_mark(tmp_path):
         assert set(store.pass_marks()) == {"SoftSphereHaptic-v0"}
         assert {t.status for t in store.trainees()} <= {"pass", "not yet"}
     assert ("sessions", 4, 4) in stages and ("pass mark", 6, 6) in stages
+
+
+def test_the_cached_demo_cohort_is_rebuilt_when_the_code_changes(tmp_path, monkeypatch):
+    """The cohort's sessions are played by the simulator: a cache keyed on softenv's version alone served
+    a cohort of older code (found remaking results/skills_lab)."""
+    monkeypatch.setattr(cohort, "cache_dir", lambda: tmp_path)
+    built = []
+    monkeypatch.setattr(cohort, "build", lambda store, *a, **k: built.append(store))
+    monkeypatch.setattr(cohort, "code_digest", lambda: "one")
+    first = cohort.demo_store(trainees=1, sessions=1)
+    assert cohort.demo_store(trainees=1, sessions=1) == first and len(built) == 1      # read from the cache
+    monkeypatch.setattr(cohort, "code_digest", lambda: "another")
+    assert cohort.demo_store(trainees=1, sessions=1) != first and len(built) == 2

@@ -29,6 +29,7 @@ import numpy as np
 from .. import __version__
 from .._cache import cache_dir
 from .._validation import check_int
+from ..baselines.run_store import code_digest
 from ..training import scoring
 from ..training.logs import HAND_LOG, save_log
 from ..training.trainee import degrade, expert_hand_log
@@ -81,10 +82,10 @@ def build(store: Store, trainees: int = 12, sessions: int = 10, seed: int = 0, p
 def demo_store(trainees: int = 12, sessions: int = 10, seed: int = 0,
                progress: Callable[[str, int, int], None] | None = None) -> Path:
     """The demo cohort's SQLite file in softenv's cache, built on first use (about a minute; made
-    aside and moved into place, so a reader never sees half of it). Rebuilt when softenv or the score's
-    formula changes."""
+    aside and moved into place, so a reader never sees half of it). Rebuilt when softenv's code changes
+    (the simulator that plays the sessions as much as the score's formula)."""
     key = json.dumps({"trainees": trainees, "sessions": sessions, "seed": seed, "version": __version__,
-                      "formula": scoring.SCORE_VERSION}, sort_keys=True)
+                      "formula": scoring.SCORE_VERSION, "code": code_digest()}, sort_keys=True)
     path = cache_dir() / f"skills-demo-{hashlib.sha256(key.encode()).hexdigest()[:16]}.sqlite"
     if path.exists():
         return path
