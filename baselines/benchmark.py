@@ -609,8 +609,6 @@ def _grade_plot(summaries: list[dict[str, Any]], graded: list[tuple[int, str]], 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharex=True)
     scenes = dict(graded)
     names = list(dict.fromkeys(s["policy"] for s in summaries if s["scene"] in scenes.values()))
-    colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
-    markers = "osD^v<>ph*"
     grade_of = {scene: g for g, scene in GRADED_SCENES.items()}
     lowest = 100.0
     for ax, zoom in zip(axes, (False, True)):
@@ -625,7 +623,8 @@ def _grade_plot(summaries: list[dict[str, Any]], graded: list[tuple[int, str]], 
             offset = (i - (len(names) - 1) / 2) * 0.02           # side by side where they agree
             ax.errorbar(np.array(grades) + offset, mean, yerr=[mean - [c["ci_low"] for c in score],
                                                                [c["ci_high"] for c in score] - mean],
-                        fmt=markers[i % len(markers)] + "-", color=colours[i], ms=4, capsize=2, lw=1, label=name)
+                        fmt=policy_style(name, plt)["marker"] + "-", color=policy_style(name, plt)["color"], ms=4,
+                        capsize=2, lw=1, label=name)
         for scene in plan.train_on:
             ax.axvspan(grade_of[scene] - 0.3, grade_of[scene] + 0.3, color="0.92", zorder=0)
         ax.set_xticks([g for g, _ in graded])
@@ -646,20 +645,17 @@ def _error_plot(summaries: list[dict[str, Any]], scenes: list[str], command: str
     # one panel per scene in a grid; every policy keeps its colour and marker across panels, and the
     # names sit in one legend below the grid (point labels would overlap where policies agree)
     fig, axes = _grid(plt, len(scenes), legend_room=1.2)
-    names = list(dict.fromkeys(s["policy"] for s in summaries))
-    colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
-    markers = "osD^v<>ph*"
     for ax, scene in zip(axes.flat, scenes):
         lowest = min((max(s["final_error_mm"]["ci_low"], ERROR_FLOOR_MM) for s in summaries if s["scene"] == scene),
                      default=ERROR_FLOOR_MM)
         for s in (s for s in summaries if s["scene"] == scene):
-            e, i = s["final_error_mm"], names.index(s["policy"])
+            e, style = s["final_error_mm"], policy_style(s["policy"], plt)
             x = max(s["decision_us"], 0.5)
             if e["mean"] < ERROR_FLOOR_MM:        # the oracle's ~1e-7 mm would squash every other policy
-                ax.plot(x, ERROR_FLOOR_MM, marker="v", color=colours[i], ms=6, ls="none", label=s["policy"])
+                ax.plot(x, ERROR_FLOOR_MM, marker="v", color=style["color"], ms=6, ls="none", label=s["policy"])
                 continue
             ax.errorbar(x, e["mean"], yerr=[[e["mean"] - max(e["ci_low"], ERROR_FLOOR_MM)], [e["ci_high"] - e["mean"]]],
-                        fmt=markers[i % len(markers)], color=colours[i], ms=5, capsize=2, label=s["policy"])
+                        fmt=style["marker"], color=style["color"], ms=5, capsize=2, label=s["policy"])
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_ylim(bottom=0.7 * lowest)            # down to the floor only where a policy reaches it
@@ -692,6 +688,21 @@ def _error_plot_name(stem: str) -> str:
     return "policy_error_vs_runtime.png" if stem == "benchmark" else f"{stem}_error_vs_runtime.png"
 
 
+_MARKERS = "osD^v<>ph*"
+
+
+def policy_style(name: str, plt: Any) -> dict[str, Any]:
+    """A policy's colour and marker, the same in every figure of every report: an agent its
+    :func:`agent_colours` colour (a transferred one, ``ppo (trained on ...)``, its agent's, the marker
+    naming the grade it trained on), a baseline its own from tab20b in :data:`POLICIES` order."""
+    algo, _, trained = name.partition(" (trained on ")
+    if algo in AGENTS:
+        grade = int(trained[-2]) if trained[-2:-1].isdigit() else 0
+        return {"color": agent_colours([algo], plt)[algo], "marker": "PXd*h"[grade % 5]}
+    i = POLICIES.index(name) if name in POLICIES else len(POLICIES)
+    return {"color": plt.get_cmap("tab20b").colors[i % 20], "marker": _MARKERS[i % len(_MARKERS)]}
+
+
 def agent_colours(agents: list[str], plt: Any) -> dict[str, Any]:
     """One colour per agent in every report, whichever agents a plan trains."""
     known = [*ALGOS, TORCH_PPO]
@@ -710,6 +721,9 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
     fig, axes = _grid(plt, max(len(scenes), 1), legend_room=0.6)
     colours = agent_colours(plan.agents, plt)
     for ax, scene in zip(axes.flat, scenes):
+        lows: list[float] = []                     # each curve's band after its first fifth, and before
+        firsts: list[float] = []
+        highs: list[float] = []
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])
             if not runs:
@@ -720,6 +734,15 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
             half = 1.96 * values.std(axis=0, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.zeros_like(mean)
             ax.plot(steps, mean, color=colours[algo], label=algo)
             ax.fill_between(steps, mean - half, mean + half, color=colours[algo], alpha=0.25)
+            later = steps >= 0.2 * steps[-1]
+            lows.append(float(np.min((mean - half)[later])))
+            highs.append(float(np.max((mean + half)[later])))
+            firsts.append(float(np.min(mean - half)))
+        if firsts and min(firsts) < min(lows) - (max(highs) - min(lows)):
+            # a first evaluation far below the rest would flatten every curve: the axis starts at the rest
+            ax.set_ylim(min(lows) - 0.1 * (max(highs) - min(lows)), None)
+            ax.text(0.98, 0.02, f"earlier points down to {min(firsts):.0f} below the axis", ha="right",
+                    va="bottom", fontsize=6, transform=ax.transAxes)
         ends = [float(curves[scene, algo][0][0][-1]) for algo in plan.agents if curves.get((scene, algo))]
         if max(ends) >= 4 * min(ends):              # budgets a decade apart: each agent's curve readable
             ax.set_xscale("log")

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from softenv.baselines.agents import _literal_dict, hyperparams, load_agent, train_agent
+from softenv.baselines.agents import ALGOS, _literal_dict, hyperparams, load_agent, train_agent
 from softenv.baselines.benchmark import (ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds,
                                         learning_curve, run, seed_label)
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
@@ -435,3 +435,38 @@ def test_the_report_carries_every_episode_and_the_learning_curves(tmp_path):
     steps, returns = learning_curve(tmp_path / "runs" / "SoftSphere-v0" / "sac-0")
     assert curve["env_steps"] == steps.tolist() and curve["test_return"] == np.round(returns, 4).tolist()
     assert "| episodes above 100 (%) |" in (tmp_path / "benchmark.md").read_text()
+
+
+def test_every_policy_keeps_one_style_in_every_figure():
+    """A policy's colour and marker come from its name alone (they changed from figure to figure when each
+    figure numbered the policies it drew); no two policies a report can draw share both."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softenv.baselines.benchmark import POLICIES, policy_style
+
+    names = [*POLICIES, *ALGOS]
+    styles = [(tuple(policy_style(n, plt)["color"]), policy_style(n, plt)["marker"]) for n in names]
+    assert len(set(styles)) == len(names)
+    assert policy_style("ppo", plt)["color"] == agent_colours(["ppo"], plt)["ppo"]
+    moved = policy_style("ppo (trained on grade2)", plt)
+    assert moved["color"] == policy_style("ppo", plt)["color"] and moved["marker"] != policy_style("ppo", plt)["marker"]
+
+
+def test_a_first_evaluation_far_below_does_not_flatten_the_learning_curves():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softenv.baselines.benchmark import _learning_curves
+
+    steps = np.arange(1, 11) * 1000.0
+    runs = [(steps, np.r_[-1700.0, np.linspace(-50, -10, 9) + s]) for s in (0.0, 2.0, -2.0)]
+    plan = Plan(["SoftSphere-v0"], [], ["ppo"], {"SoftSphere-v0": 3}, {"ppo": 10_000})
+    fig = _learning_curves(plan, {("SoftSphere-v0", "ppo"): runs}, "test", plt)
+    ax = fig.axes[0]
+    assert -80 < ax.get_ylim()[0] < -50 and any("below the axis" in t.get_text() for t in ax.texts)
+    plt.close(fig)
