@@ -237,9 +237,15 @@ def main() -> None:
         row, _ = evaluate_one("mlp", data, split, sm, seed, True)
         small.append(row["mse_norm"])
 
+    def of(model: str, law: str = "linear", pts: int = 441, split: str = "rows", key: str = "mse_norm") -> np.ndarray:
+        return np.array([r[key] for r in rows if r["model"] == model and r["law"] == law and r["points"] == pts
+                         and r["split"] == split])
+
     def mean_of(model: str, law: str = "linear", pts: int = 441, split: str = "rows", key: str = "mse_norm") -> float:
-        return float(np.mean([r[key] for r in rows if r["model"] == model and r["law"] == law and r["points"] == pts
-                              and r["split"] == split]))
+        return float(np.mean(of(model, law, pts, split, key)))
+
+    anfis = of("anfis")
+    near = int(np.sum(anfis <= 0.003 * 1.5))
 
     md = ["# The paper's regressors: error against run time", "",
           f"Made by `python scripts/evaluate_regressors.py --seeds {args.seeds} --out {out}` at {code_revision()} in "
@@ -257,8 +263,9 @@ def main() -> None:
           "| | paper | here (linear law, 441 points, random rows) |", "|---|---|---|",
           f"| linear (order-1) model | \"disappointing\", \"huge\" errors | MSE {mean_of('poly1'):.2e}; surface RMSE "
           f"{mean_of('poly1', key='rmse_mm'):.3f} mm (order 3: {mean_of('poly3'):.2e}) |",
-          f"| fuzzy model (ANFIS) | MSE 0.003 | MSE {mean_of('anfis'):.2e} with MATLAB's defaults (10 epochs); "
-          f"{mean_of('anfis100'):.2e} with 100 epochs |",
+          f"| fuzzy model (ANFIS) | MSE 0.003 | MSE over {len(anfis)} seeds with MATLAB's defaults (10 epochs): mean "
+          f"{anfis.mean():.2e}, median {np.median(anfis):.2e} (seeds {', '.join(f'{v:.1e}' for v in np.sort(anfis))}); "
+          f"mean {mean_of('anfis100'):.2e} with 100 epochs |",
           f"| neural network 4-7-9-k | MSE 9e-5 | MSE {mean_of('mlp'):.2e} at k = 10; {np.mean(small):.2e} at k = 4 "
           f"(4 deformations); 4-20-20-k: {mean_of('mlp20'):.2e} |",
           f"| model + reconstruction time | < 0.01 s | haptic update {mean_of('anfis', key='haptic_us'):.0f} us (ANFIS), "
@@ -266,7 +273,9 @@ def main() -> None:
           f"| fuzzy model load time | 0.45 s | {mean_of('anfis', key='load_s') * 1e3:.1f} ms |",
           f"| unknown force vectors | \"not so satisfactory\" | held-out contacts: MSE {mean_of('anfis', split='contacts'):.2f} "
           f"(ANFIS), {mean_of('mlp', split='contacts'):.2f} (MLP), {mean_of('exact', split='contacts'):.2e} (exact) |", "",
-          "Where and why ours differ. ANFIS with MATLAB's defaults lands on the paper's 0.003. The paper's network's "
+          f"Where and why ours differ. ANFIS with MATLAB's defaults against the paper's 0.003 (one run): median "
+          f"{np.median(anfis):.1e}, mean {anfis.mean():.1e} over {len(anfis)} seeds; {near} of them lie within 1.5 "
+          "times 0.003 and the mean follows the seeds above. The paper's network's "
           "MSE here is on shape parameters scaled to [-1, 1]; measured as MATLAB's `perform` measures it, on the "
           "unscaled parameters of a unit sphere, the same net at k = 10 gives the paper's 9e-5 "
           "(`results/paper_network.md`, `python scripts/paper_network.py`). Scaled, it stays near 3e-2 at k = 10 "
