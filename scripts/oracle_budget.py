@@ -69,8 +69,10 @@ def main() -> None:
     marks = [m for m in MARKS if m <= args.iterations]
     record: dict[str, dict] = {}
     rows = []
-    fig, axes = plt.subplots(1, len(args.scenes), figsize=(6.2 * len(args.scenes), 4.4), squeeze=False)
-    for scene, ax in zip(args.scenes, axes[0]):
+    # top: every start over the whole range; bottom: the starts from the expert near 100, which the
+    # start from no force would squash
+    fig, axes = plt.subplots(2, len(args.scenes), figsize=(6.2 * len(args.scenes), 8.0), squeeze=False)
+    for scene, ax, zoom in zip(args.scenes, axes[0], axes[1]):
         anchors = load_anchors(scene, seeds, echo=print)
         shipped = oracle_of(scene)["settings"]
         world = World(scene_config(scene))
@@ -81,8 +83,10 @@ def main() -> None:
             oracle.plan(make_baseline(warm, world), args.episodes, seeds)
             curve = scores(oracle.history_by_episode, anchors.zero, anchors.oracle)      # (iterations + 1, episodes)
             curves[label] = {"score": curve, "seconds": oracle.elapsed}
-            ax.plot(np.arange(len(curve)), curve, color=colour, lw=0.4, alpha=0.35)
-            ax.plot(np.arange(len(curve)), curve.mean(axis=1), color=colour, lw=2.0, label=f"from {label} (mean)")
+            for panel in (ax, zoom) if warm == "expert" else (ax,):
+                panel.plot(np.arange(len(curve)), curve, color=colour, lw=0.4, alpha=0.35)
+                panel.plot(np.arange(len(curve)), curve.mean(axis=1), color=colour, lw=2.0,
+                           label=f"from {label} (mean)")
             for m in marks:
                 at = curve[m]
                 rows.append((scene, label, m, at.mean(), at.min(), at.max(), int(np.sum(at > 100.0 + 1e-6)),
@@ -92,13 +96,18 @@ def main() -> None:
         best = np.max([c["score"][-1] for c in curves.values()], axis=0)
         rows.append((scene, f"best of the {len(curves)} starts", args.iterations, best.mean(), best.min(), best.max(),
                      int(np.sum(best > 100.0 + 1e-6)), float("nan")))
-        ax.axhline(100.0, color="k", lw=0.8, ls="--", label="shipped anchor (16 x 30 from the expert)")
-        ax.axvline(shipped["iterations"], color="0.5", lw=0.8, ls=":")
-        ax.set_xlabel("CEM iterations (16 candidates each)")
-        ax.set_ylabel("normalized score against the shipped anchors")
-        ax.set_title(scene, fontsize=10)
-        ax.set_ylim(max(-5.0, float(np.min([c["score"] for c in curves.values()])) - 2), None)
-        ax.legend(fontsize=7, loc="lower right")
+        near = [c["score"] for k, c in curves.items() if STARTS[k][0] == "expert"]
+        for panel in (ax, zoom):
+            panel.axhline(100.0, color="k", lw=0.8, ls="--", label="shipped anchor (16 x 30 from the expert)")
+            panel.axvline(shipped["iterations"], color="0.5", lw=0.8, ls=":")
+            panel.set_xlabel("CEM iterations (16 candidates each)")
+            panel.set_ylabel("normalized score against the shipped anchors")
+            panel.legend(fontsize=7, loc="lower right")
+        ax.set_title(f"{scene}: every start", fontsize=10)
+        zoom.set_title(f"{scene}: the starts from the expert, closer (their first iterations below)", fontsize=9)
+        if near:
+            settled = np.concatenate([c[min(10, len(c) - 1):].ravel() for c in near])
+            zoom.set_ylim(float(np.percentile(settled, 2)) - 0.5, float(np.max(near)) + 0.5)
         record[scene] = {"seeds": seeds, "zero": anchors.zero.tolist(), "oracle": anchors.oracle.tolist(),
                          "starts": {k: {"score": np.round(v["score"], 6).tolist(), "seconds": v["seconds"]}
                                     for k, v in curves.items()}}
