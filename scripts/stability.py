@@ -263,8 +263,9 @@ INPUT_CLASSES = {
         "format_version, a directory", "refused in one line naming the file; exit 2"),
     "wrong types": (
         "seeds, options and actions (None, strings, objects, ragged, complex, bool, NaN, out of range) on the "
-        "single, vector, torch and laryngoscope envs; longdouble actions; scene=5, NaN and backward times, ragged "
-        "rows and numeric strings to score_hand_log, degrade, replay_hand and HapticLoop.tick",
+        "single, vector, torch and laryngoscope envs; longdouble actions; config=5 and sections where a made config "
+        "belongs, NaN and backward times, ragged rows and numeric strings to score_hand_log, degrade, replay_hand "
+        "and HapticLoop.tick",
         "ValueError naming the argument, the env's state bit for bit as before; rewards stay Python floats"),
     "command lines": (
         "compare, bench, play, data, fit and score options out of range or of unknown choices; any value "
