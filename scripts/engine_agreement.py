@@ -1,7 +1,7 @@
 """The laryngoscope's batched twin against single envs over many seeded episodes (issue 37, part 2);
 writes ``results/engine_agreement.md`` and ``.json``.
 
-For each haptic scene and baseline policy, ``--episodes`` test episodes (env ``i`` seeded ``1000 + i``)
+For each laryngoscope scene (both ids and each airway grade) and baseline policy, ``--episodes`` test episodes (env ``i`` seeded ``1000 + i``)
 run twice through ``baselines.evaluate``: once on the batched twin with ``--engine`` (all at once), once
 on as many single envs (pymunk, Gymnasium's ``SyncVectorEnv``). Per metric (the episode's score and
 errors, and the clinical metrics): how many episodes agree bit for bit, the largest difference, and the
@@ -24,9 +24,13 @@ import numpy as np
 from scipy.stats import ks_2samp
 
 from softenv.baselines.benchmark import baseline_job
+from softenv.baselines.evaluate import SCENES, device_kind
 from softenv._artifact import write_text
 from softenv.bench.timing import code_revision
-from softenv.envs import HAPTIC_SCENES
+
+# every benchmark scene on the laryngoscope: both ids and each airway grade (the env id SoftSphereAirway-v0
+# is not a scene of its own: its grades are)
+LARYNGOSCOPE = [s for s in SCENES if device_kind(s) == "laryngoscope"]
 
 
 def compare(scene: str, name: str, episodes: int, engine: str) -> dict[str, dict[str, float | None]]:
@@ -53,7 +57,7 @@ def main() -> None:
     args = parser.parse_args()
     start = time.time()
     table: dict[str, dict[str, dict[str, dict[str, Any]]]] = {}
-    for scene in HAPTIC_SCENES:
+    for scene in LARYNGOSCOPE:
         for name in args.policies:
             table.setdefault(scene, {})[name] = compare(scene, name, args.episodes, args.engine)
             print(f"{scene} {name}: done", flush=True)
@@ -61,7 +65,7 @@ def main() -> None:
     lines = [f"# The batched twin ({args.engine} engine) against single envs", "",
              f"Made by `{command.strip()}` at commit `{code_revision()}` in {time.time() - start:.0f} s: {args.episodes} "
              "seeded test episodes of "
-             "each policy on each haptic scene, on the batched twin and on as many single (pymunk) envs. "
+             "each policy on each laryngoscope scene, on the batched twin and on as many single (pymunk) envs. "
              "Per metric: episodes equal bit for bit, the largest difference, and the two-sample "
              "Kolmogorov-Smirnov p-value of the two distributions.", "",
              "| scene | policy | metrics | equal episodes (fewest of any metric) | largest difference | smallest KS p-value |",
