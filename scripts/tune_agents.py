@@ -7,8 +7,9 @@ Each trial trains the agent (``softenv.baselines.agents.train_agent``, its YAML 
 ``gamma`` and ``learning_rate``) on every ``--seeds`` seed for ``--timesteps`` env steps (default: the
 YAML budget), and scores it by the mean summed shape error of its ``--episodes`` first training-target
 episodes (the score's ``E``; lower is better): the test targets the benchmark reports are never seen.
-Optuna's TPE sampler (seed 0) proposes ``gamma`` from 0.9 to 0.999 and ``learning_rate`` from 1e-5 to
-1e-3 (log scale); the first 5 trials sample at random. The study is an SQLite file in ``--runs``, so a
+The first trial is the YAML's own values, so the search is measured against them; then Optuna's TPE
+sampler (seed 0) proposes ``gamma`` from 0.9 to 0.999 and ``learning_rate`` from 1e-5 to 1e-3 (log
+scale), its first 5 trials at random. The study is an SQLite file in ``--runs``, so a
 stopped search resumes: ``--trials`` is the total wanted, finished trials are kept, one cut short is
 marked failed and run again as a new trial.
 
@@ -84,6 +85,9 @@ def main() -> None:
         sampler=optuna.samplers.TPESampler(seed=0, n_startup_trials=5))
     for cut in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         study.tell(cut.number, state=optuna.trial.TrialState.FAIL)        # a run that was stopped
+    chosen = {"gamma": yaml_params["gamma"], "learning_rate": yaml_params["learning_rate"]}
+    if not study.trials:
+        study.enqueue_trial(chosen, user_attrs={"yaml": True})     # the values the search must beat
     started = time.perf_counter()
     while len(finished := study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))) < args.trials:
         trial = study.ask()
@@ -105,11 +109,14 @@ def main() -> None:
               f"learning_rate log-uniform in {list(LEARNING_RATES)}. The YAML's values: gamma "
               f"{yaml_params.get('gamma')}, learning_rate {yaml_params.get('learning_rate')}.\n")
     rows = ["| trial | gamma | learning_rate | mean error sum | by seed | minutes |", "|---|---|---|---|---|---|"]
-    rows += [f"| {t.number} | {t.params['gamma']} | {t.params['learning_rate']:.3g} | {t.value:.2f} | "
+    rows += [f"| {t.number}{' (the YAML)' if t.user_attrs.get('yaml') else ''} | "
+             f"{t.params['gamma']} | {t.params['learning_rate']:.3g} | {t.value:.2f} | "
              f"{', '.join(f'{e:.2f}' for e in t.user_attrs['error_by_seed'])} | {t.user_attrs['seconds'] / 60:.1f} |"
              for t in sorted(finished, key=lambda t: t.value)]
     best_line = (f"\nBest: trial {best.number}, gamma {best.params['gamma']}, learning_rate "
-                 f"{best.params['learning_rate']:.3g} (mean error sum {best.value:.2f}); its YAML entry: `{stem}.yml`.\n")
+                 f"{best.params['learning_rate']:.3g} (mean error sum {best.value:.2f}); its YAML entry: `{stem}.yml`. "
+                 f"Each trial is {len(args.seeds)} training seed(s): trials closer than the spread between seeds are "
+                 "not told apart by this search.\n")
     write_text(args.out / f"{stem}.md", header + "\n" + "\n".join(rows) + "\n" + best_line)
     record: dict[str, Any] = {"command": command, "commit": code_revision(), "timesteps": budget, "seeds": args.seeds,
                               "episodes": args.episodes, "best": {"number": best.number, **best.params,

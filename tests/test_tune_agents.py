@@ -29,6 +29,8 @@ def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     assert [line.split(":")[0] for line in again.stdout.splitlines() if line.startswith("trial ")] == ["trial 2"]
     record = json.loads((tmp_path / "out" / "SoftSphere-v0__ppo.json").read_text())
     assert len(record["trials"]) == 3
+    first = record["trials"][0]                    # the YAML's own values, scored the same way
+    assert first["number"] == 0 and first["yaml"] and (first["gamma"], first["learning_rate"]) == (0.95, 3e-4)
     best = min(record["trials"], key=lambda t: t["value"])
     assert record["best"]["number"] == best["number"]
     entry = yaml.safe_load((tmp_path / "out" / "SoftSphere-v0__ppo.yml").read_text())["SoftSphere-v0"]
