@@ -104,7 +104,7 @@ def main() -> None:
             panel.set_ylabel("normalized score against the shipped anchors")
             panel.legend(fontsize=7, loc="lower right")
         ax.set_title(f"{scene}: every start", fontsize=10)
-        zoom.set_title(f"{scene}: the starts from the expert, closer (their first iterations below)", fontsize=9)
+        zoom.set_title(f"{scene}: the starts from the expert, closer", fontsize=9)
         if near:
             settled = np.concatenate([c[min(10, len(c) - 1):].ravel() for c in near])
             zoom.set_ylim(float(np.percentile(settled, 2)) - 0.5, float(np.max(near)) + 0.5)
