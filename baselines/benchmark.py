@@ -35,6 +35,7 @@ from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import ORACLE, anchor_job
+from .curves import Curve, convergence, convergence_report, learning_curve
 from .minari_datasets import KINDS, dataset_id, load_or_make
 from .evaluate import CLINICAL, GRADED_SCENES, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .policies import BASELINES, applies, make_baseline
@@ -187,7 +188,7 @@ def baseline_job(name: str, scene: str, episodes: int, vectorization_mode: str =
     return evaluate(planner, scene, episodes, vectorization_mode=vectorization_mode, **make)
 
 
-AgentResult = tuple[Episodes, tuple[np.ndarray, np.ndarray] | None]
+AgentResult = tuple[Episodes, Curve | None]
 
 
 def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
@@ -199,7 +200,7 @@ def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None
 
 
 def transfer_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
-                 eval_scenes: tuple[str, ...]) -> tuple[list[Episodes], tuple[np.ndarray, np.ndarray] | None]:
+                 eval_scenes: tuple[str, ...]) -> tuple[list[Episodes], Curve | None]:
     """Train one agent on ``scene`` (or load its finished run), then evaluate it on each of ``eval_scenes``
     (scenes of one observation and action space: the airway grades); its learning curve as :func:`agent_job`'s."""
     _torch_single_thread()
@@ -211,15 +212,6 @@ def transfer_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | N
 
 def transfer_key(scene: str, algo: str, seed: int) -> str:
     return f"{scene} {algo} seed {seed} (evaluated on every scene)"
-
-
-def learning_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """An SB3 run's learning curve: test-target return against env steps (its EvalCallback's log)."""
-    log = run_dir / "eval" / "evaluations.npz"
-    if not log.exists():
-        return None
-    with np.load(log, allow_pickle=False) as data:
-        return data["timesteps"], data["results"].mean(axis=1)
 
 
 def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None,
@@ -320,7 +312,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     reused = len(grid) - len(todo)
     summaries: list[dict[str, Any]] = []
     timings: dict[str, float] = {}
-    curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+    curves: dict[tuple[str, str], list[Curve]] = {}
+    walls: dict[tuple[str, str], list[float]] = {}
     failed = [r for r in results.values() if not r.ok]
     for scene in plan.scenes:
         anchors = results[f"{scene} anchors"]
@@ -349,6 +342,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             if not done:
                 continue
             curves[(train, algo)] = [curve for _, curve in done if curve is not None]
+            walls[(train, algo)] = [r.wall_s for r in runs if r.ok]
             pooled = [episodes_of(v) for v in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(policy, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
@@ -363,7 +357,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     echo(format_compact(summaries))
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
-        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, how, failed, stem, reused)
+        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, walls, how, failed, stem, reused)
         echo(f"wrote {out_dir / stem}.md, .csv and .json (every column, the agents' budgets, the clinical metrics), "
              f"{out_dir / _error_plot_name(stem)}, {out_dir / stem}_learning_curves.png and _gallery.png")
     if failed:
@@ -515,9 +509,11 @@ def provenance(command: str) -> dict[str, Any]:
 
 
 def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, command: str, elapsed: float,
-                  timings: dict[str, float], curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
-                  how: str, failed: list[Any], stem: str = "benchmark", reused: int = 0) -> None:
+                  timings: dict[str, float], curves: dict[tuple[str, str], list[Curve]],
+                  walls: dict[tuple[str, str], list[float]], how: str, failed: list[Any], stem: str = "benchmark",
+                  reused: int = 0) -> None:
     prov = {**provenance(command), "executor": how, "jobs_from_earlier_runs": reused}
+    curve_table, curve_rows = convergence_report(curves, walls)
 
     def write_csv(fh: Any) -> None:
         fh.write(f"# made by: {command} at {prov['code']} ({prov['date']}; softenv {prov['softenv']}, "
@@ -533,7 +529,7 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
     points = {f"{scene} {algo}": [{"env_steps": steps.tolist(), "test_return": np.round(returns, 4).tolist()}
                                   for steps, returns in runs] for (scene, algo), runs in curves.items()}
     numbers = json.dumps({"provenance": prov, "summaries": summaries, "timings_s": timings, "learning_curves": points,
-                          "failed_jobs": {r.key: r.error for r in failed}}, indent=1, default=float)
+                          "convergence": curve_rows, "failed_jobs": {r.key: r.error for r in failed}}, indent=1, default=float)
     budgets = {a: plan.timesteps.get(a) or (agent_budget(plan, a, plan.scenes[0]) if a == TORCH_PPO else
                                             {s: agent_budget(plan, a, s) for s in plan.scenes})
                for a in plan.agents}
@@ -562,6 +558,12 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           *(["Agents by training seed (normalized score, mean [95 % bootstrap interval] over each seed's test "
              "episodes; the table above pools them):\n", format_seeds(summaries), ""]
             if any("seed_scores" in s for s in summaries) else []),
+          *(["Learning curves against the convergence rule (`baselines/curves.py`): converged when the seeds' mean "
+             "test-target return rose over the last 20 % of the budget by less than the half-width of the 95 % "
+             "interval over seeds of the final return (a bootstrap over the seeds). Agents compared at equal "
+             "environment steps, not equal wall time: each curve's last evaluation at or before the smallest "
+             "budget among the agents on the scene (mean [95 % interval over seeds]); the job wall time (training "
+             "and test episodes, single-threaded) is beside it.\n", curve_table, ""] if curve_rows else []),
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times, every episode's score by "
           f"run and the learning curves' points), "
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`"
@@ -587,7 +589,7 @@ ERROR_FLOOR_MM = 1e-3         # the error axes start here (1 um); below it, a po
 
 
 def _plots(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path,
-           curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]], command: str,
+           curves: dict[tuple[str, str], list[Curve]], command: str,
            stem: str) -> list[tuple[Path, Any]]:
     """The report's figures, drawn, with the paths they are saved to (by the caller, with the tables)."""
     import matplotlib                                       # the viz extra
@@ -711,7 +713,7 @@ def agent_colours(agents: list[str], plt: Any) -> dict[str, Any]:
     return {algo: colours[algo] for algo in agents}
 
 
-def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]],
+def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[Curve]],
                      command: str, plt: Any) -> Any:
     """Test-target return against env steps, one panel per scene that trained agents; each agent one
     colour in every panel, named in one legend below the grid."""
@@ -724,10 +726,13 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
         lows: list[float] = []                     # each curve's band after its first fifth, and before
         firsts: list[float] = []
         highs: list[float] = []
+        rising: list[str] = []                     # agents the convergence rule finds still rising
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])
             if not runs:
                 continue
+            if convergence(runs)["converged"] is False:
+                rising.append(algo)
             n = min(len(c[0]) for c in runs)
             steps, values = runs[0][0][:n], np.stack([c[1][:n] for c in runs])
             mean = values.mean(axis=0)
@@ -743,6 +748,9 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[tuple[np.nda
             ax.set_ylim(min(lows) - 0.1 * (max(highs) - min(lows)), None)
             ax.text(0.98, 0.02, f"earlier points down to {min(firsts):.0f} below the axis", ha="right",
                     va="bottom", fontsize=6, transform=ax.transAxes)
+        if rising:
+            ax.text(0.02, 0.02, "still rising (rule in the report): " + ", ".join(rising), ha="left", va="bottom",
+                    fontsize=6, transform=ax.transAxes)
         ends = [float(curves[scene, algo][0][0][-1]) for algo in plan.agents if curves.get((scene, algo))]
         if max(ends) >= 4 * min(ends):              # budgets a decade apart: each agent's curve readable
             ax.set_xscale("log")

@@ -7,7 +7,8 @@ import pytest
 
 from softenv.baselines.agents import ALGOS, _literal_dict, hyperparams, load_agent, train_agent
 from softenv.baselines.benchmark import (ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds,
-                                        learning_curve, run, seed_label)
+                                        run, seed_label)
+from softenv.baselines.curves import learning_curve
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.baselines.policies import BASELINES, InversionPolicy, PlanningOracle, applies, make_baseline
 from softenv.devices.laryngoscope.control import HandController
@@ -434,7 +435,12 @@ def test_the_report_carries_every_episode_and_the_learning_curves(tmp_path):
     [curve] = report["learning_curves"]["SoftSphere-v0 sac"]
     steps, returns = learning_curve(tmp_path / "runs" / "SoftSphere-v0" / "sac-0")
     assert curve["env_steps"] == steps.tolist() and curve["test_return"] == np.round(returns, 4).tolist()
-    assert "| episodes above 100 (%) |" in (tmp_path / "benchmark.md").read_text()
+    md = (tmp_path / "benchmark.md").read_text()
+    assert "| episodes above 100 (%) |" in md
+    [row] = report["convergence"]                        # one seed: the rule has no interval to apply
+    assert row["agent"] == "sac" and row["seeds"] == 1 and row["converged"] is None
+    assert row["final"] == pytest.approx(returns[-1]) and row["equal_steps"] == int(steps[-1])
+    assert "| SoftSphere-v0 | sac | 1 |" in md and "- (one seed)" in md
 
 
 def test_every_policy_keeps_one_style_in_every_figure():

@@ -1,0 +1,75 @@
+"""The learning curves' convergence rule and the comparison at equal env steps (baselines/curves.py),
+against sums done by hand on made-up curves."""
+
+import numpy as np
+import pytest
+
+from softenv.baselines.curves import at_equal_steps, convergence, convergence_report, value_at
+from softenv.stats import bootstrap_ci
+
+STEPS = np.arange(1, 11) * 1000.0
+
+
+def test_value_at_reads_the_last_evaluation_at_or_before():
+    curve = (STEPS, -np.arange(10.0, 0.0, -1.0))
+    assert value_at(curve, 8000) == (-3.0, 8000)
+    assert value_at(curve, 8999) == (-3.0, 8000)
+    with pytest.raises(ValueError, match=r"steps=500: .* first evaluation is at 1000"):
+        value_at(curve, 500)
+
+
+def test_a_flat_tail_converges_and_a_rising_one_does_not():
+    """Three seeds level at -10, -12, -14 after 5,000 steps: no rise in the last fifth, so converged.
+    Three seeds still climbing 5 a step over seeds within 1 of each other: the rise (10 from 8,000 to
+    10,000 steps) is far above the interval's half-width, so not converged."""
+    flat = [(STEPS, np.r_[np.linspace(-100, level, 5), [level] * 5]) for level in (-10.0, -12.0, -14.0)]
+    c = convergence(flat)
+    assert c["rise"] == 0.0 and c["final"] == pytest.approx(-12.0) and c["converged"] is True
+    mean, low, high = bootstrap_ci(np.array([-10.0, -12.0, -14.0]))
+    assert (c["final_low"], c["final_high"], c["half_width"]) == (low, high, (high - low) / 2)
+
+    rising = [(STEPS, -60 + 5 * np.arange(10) + offset) for offset in (0.0, 0.5, 1.0)]
+    r = convergence(rising)
+    assert r["rise"] == pytest.approx(10.0) and r["half_width"] < 1 and r["converged"] is False
+    assert r["budget"] == 10_000 and r["seeds"] == 3
+
+
+def test_one_seed_has_no_verdict_and_bad_input_is_refused():
+    assert convergence([(STEPS, STEPS / 1000)])["converged"] is None
+    with pytest.raises(ValueError, match=r"runs=\[\]"):
+        convergence([])
+    with pytest.raises(ValueError, match=r"tail=1.5: .* \(0, 1\)"):
+        convergence([(STEPS, STEPS)], tail=1.5)
+
+
+def test_agents_are_read_at_the_smallest_budget():
+    """SAC's budget is 4,000 steps, PPO's 10,000: both are read at 4,000, PPO at its evaluation there."""
+    ppo = [(STEPS, STEPS / 100), (STEPS, STEPS / 100 + 2)]
+    sac = [(STEPS[:4], np.array([1.0, 2.0, 3.0, 4.0]))]
+    steps, at = at_equal_steps({"ppo": ppo, "sac": sac})
+    assert steps == 4000
+    assert at["ppo"][0] == pytest.approx(41.0) and at["sac"][0] == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="at least one curve"):
+        at_equal_steps({"ppo": ppo, "sac": []})
+
+    table, rows = convergence_report({("S", "ppo"): ppo, ("S", "sac"): sac}, {("S", "ppo"): [30.0, 50.0]})
+    assert [r["agent"] for r in rows] == ["ppo", "sac"] and rows[0]["wall_s_per_seed"] == 40.0
+    assert np.isnan(rows[1]["wall_s_per_seed"]) and rows[0]["equal_steps"] == 4000
+    assert "| S | ppo | 2 | 10,000 |" in table and "41.0" in table
+
+
+def test_the_learning_curves_name_the_agents_still_rising():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softenv.baselines.benchmark import Plan, _learning_curves
+
+    rising = [(STEPS, -60 + 5 * np.arange(10) + offset) for offset in (0.0, 0.5, 1.0)]
+    flat = [(STEPS, np.r_[np.linspace(-100, level, 5), [level] * 5]) for level in (-10.0, -12.0, -14.0)]
+    plan = Plan(["SoftSphere-v0"], [], ["ppo", "sac"], {"SoftSphere-v0": 3}, {"ppo": 10_000, "sac": 10_000})
+    fig = _learning_curves(plan, {("SoftSphere-v0", "ppo"): rising, ("SoftSphere-v0", "sac"): flat}, "test", plt)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert any(t.endswith("still rising (rule in the report): ppo") for t in texts)
+    plt.close(fig)
