@@ -11,7 +11,7 @@ from softenv.training import play
 from softenv.training.inputs import CONTROLS, DEAD_ZONE, FINE, RAMP_FLOOR, RAMP_S, PygameInput
 from softenv.training.logs import read_log
 from softenv.training.scoring import score_file
-from softenv.training.play_view import DANGER, SOLID, TARGET
+from softenv.training.play_view import DANGER, HAND, INK, PANEL, SCALE_BAR_MM, SOLID, TARGET
 
 DT = 0.02
 MAX_HAND_SPEED = 0.2          # SoftSphereHaptic-v0's device: m/s at full action
@@ -204,6 +204,42 @@ def test_the_tongue_gauge_turns_red_past_the_safe_force_and_the_teeth_are_flagge
     touched = [d for d in seen.drawn if "incisor contact" in d]
     assert touched, "the incisors were never flagged"
     assert not any("incisor contact" in d for d in seen.drawn[:10])        # not before the blade reaches them
+
+
+def _only_text(image, rect, colour, tol=6.0):
+    """Whether every pixel of ``rect`` is the label's colour blended with the white panel: nothing drawn under it."""
+    p = _pixels(image, rect).astype(float)
+    ink, paper = np.array(colour, dtype=float), np.array(PANEL, dtype=float)
+    t = np.clip((p - ink) @ (paper - ink) / np.dot(paper - ink, paper - ink), 0.0, 1.0)
+    return bool(np.linalg.norm(p - (ink + t[:, None] * (paper - ink)), axis=1).max() <= tol)
+
+
+def test_the_side_view_labels_sit_on_blank_panel_and_its_scale_bar_is_to_scale(tmp_path):
+    """Inserting, pressing and levering onto the teeth: in every kept frame each label of the side view
+    (but the tongue's, written on it) covers nothing drawn, the teeth's warning included; the scale bar
+    is as long in pixels per mm as the tongue at rest (30 mm radius) is wide."""
+    play.headless()
+    seen = Recorder(keep=(1, 12, 20, 30, 45, 60))
+    script = {0: [_key(pygame.K_LEFT, True)], 10: [_key(pygame.K_LEFT, False), _key(pygame.K_DOWN, True)],
+              22: [_key(pygame.K_DOWN, False), _key(pygame.K_UP, True), _key(pygame.K_q, True)]}
+    play.run(seconds=1.2, out_dir=tmp_path, realtime=False, echo=lambda s: None, screens=False, on_frame=seen,
+             script=lambda f: script.get(f, []))
+    checked = set()
+    for frame, image in seen.frames.items():
+        if frame == "end" or seen.phases[frame] != "run":           # the cards over the start and end dim it
+            continue
+        drawn = seen.drawn[frame]
+        labels = {n: r for n, r in drawn.items() if (n.startswith("label:") and n != "label:tongue")
+                  or n in ("glottic view", "incisor contact")}
+        for name, rect in labels.items():
+            colour = HAND if name == "label:hand" else DANGER if name == "incisor contact" else INK
+            assert _only_text(image, rect, colour), f"frame {frame}: the label {name!r} covers a drawing"
+            checked.add(name)
+    assert {"label:hand", "label:handle", "label:blade", "label:eye", "glottic view", "incisor contact"} <= checked
+    at_rest = seen.drawn[seen.phases.index("run")]
+    px_per_mm = at_rest["tongue"][2] / 60.0
+    mm = next(n for n in SCALE_BAR_MM if n * px_per_mm >= 60)
+    assert at_rest["scale bar"][2] == pytest.approx(mm * px_per_mm, abs=2)
 
 
 def test_the_tongue_bar_turns_to_the_danger_colour_past_the_safe_force_only(tmp_path):

@@ -7,7 +7,8 @@ A frame (1280 x 720 px) has four parts:
   hand, the upper incisors (red, with the force, while the blade touches them), and the line of sight
   from the laryngoscopist's eye to the glottis, green where it is clear (the glottic view,
   :func:`softenv.devices.laryngoscope.clinical.glottic_view`). It is sized to the hand's whole workspace at every wrist
-  angle, so nothing leaves it;
+  angle, so nothing leaves it, with a scale bar in its corner; a label whose place would cover a drawing
+  moves to the nearest blank place around what it names;
 * **the tongue in 3D**, seen from the mouth, coloured by how far each point still is from the target,
   the target as a green wireframe: the press and the sideways sweep both show here;
 * **gauges** with scales in newtons: the tongue force (the safe limit labelled, the bar red past it),
@@ -51,6 +52,7 @@ DANGER = (205, 40, 40)
 CLEAR = (160, 225, 160)
 BLOCKED = (215, 215, 215)
 HAND = (40, 90, 200)
+SCALE_BAR_MM = (5, 10, 20, 50, 100)          # the side view's scale bar: the first of these at least 60 px long
 # the 3D tongue's colour ramp: on target (green) -> halfway (amber) -> as far as at rest or more (red)
 RAMP = np.array([[120, 200, 120], [240, 200, 80], [210, 60, 60]], dtype=np.float64) / 255.0
 
@@ -90,7 +92,7 @@ class PlayView:
         self._shade.fill((30, 30, 40, 110))
         self.drawn: dict[str, Rect] = {}
         self.last_forces: dict[str, float] = {}             # what the gauges showed last (N)
-        self._labels: list[tuple[str, Any, tuple[int, int], tuple[int, int, int], str | None]] = []
+        self._labels: list[tuple[str, Any, tuple[int, int], tuple[int, int, int], str | None, bool]] = []
 
     # -- screens ---------------------------------------------------------------------------------------
     def start_screen(self, env: Any) -> None:
@@ -188,11 +190,12 @@ class PlayView:
         pg.draw.circle(self.screen, INK, self.px(eye), 6, 2)
         self._label("eye", eye, (10, -8))
         self._label(f"line of sight: {view_pct:.0f} % of the glottis", eye, (-150, 12), name="glottic view")
-        self._label("tongue", (0.0, -0.55 * R), (-24, 0))
+        self._label("tongue", (0.0, -0.55 * R), (-24, 0), on_shape=True)
         # the laryngoscope: handle (knurled), blade, the light at the tip
         heel, top = device["handle"]
         grip = capsule(np.asarray(heel), np.asarray(top), 0.008)
         pg.draw.polygon(self.screen, (70, 78, 90), self.pxs(grip))
+        self.drawn["handle"] = self._bbox(grip)
         along = (np.asarray(top) - heel) / max(float(np.linalg.norm(np.asarray(top) - heel)), 1e-12)
         across = np.array([-along[1], along[0]]) * 0.008
         for s in np.linspace(0.3, 0.9, 7):
@@ -211,6 +214,7 @@ class PlayView:
         tooth = capsule(np.asarray(a), np.asarray(b), r)
         pg.draw.polygon(self.screen, DANGER if touched else TOOTH, self.pxs(tooth))
         pg.draw.polygon(self.screen, (138, 127, 80), self.pxs(tooth), 2)
+        self.drawn["upper incisors"] = self._bbox(tooth)
         if touched:
             pg.draw.circle(self.screen, DANGER, self.px(a), max(10, int(2.5 * r * self.scale)), 3)
             self._label(f"on the teeth! {device['incisor_force']:.1f} N", b, (12, -10), colour=DANGER,
@@ -230,9 +234,21 @@ class PlayView:
             pg.draw.circle(self.screen, INK, self.px(c), 4)
             tail = c + c / max(float(np.linalg.norm(c)), 1e-12) * 0.6 * R * device["tongue_force"] / self.max_force_N
             pg.draw.line(self.screen, INK, self.px(tail), self.px(c), 2)
+        self._scale_bar()
         self._draw_labels()
         self.screen.set_clip(None)
         return view_pct
+
+    def _scale_bar(self) -> None:
+        """A bar of a round length in the side view's lower left corner: the view is to scale, so say which."""
+        mm = next(n for n in SCALE_BAR_MM if n * 1e-3 * self.scale >= 60)
+        length = int(round(mm * 1e-3 * self.scale))
+        x, y = SIDE[0] + 16, SIDE[1] + SIDE[3] - 16
+        self.pg.draw.line(self.screen, INK, (x, y), (x + length, y), 3)
+        for end in (x, x + length):
+            self.pg.draw.line(self.screen, INK, (end, y - 6), (end, y + 1), 2)
+        self.drawn["scale bar"] = (x, y - 1, length, 3)
+        self._text(f"{mm} mm", (x + length + 8, y - 9), 18, name="scale bar label")
 
     def _solid(self, vertices: np.ndarray) -> None:
         pg = self.pg
@@ -389,15 +405,31 @@ class PlayView:
         return out
 
     def _label(self, text: str, at: Any, offset: tuple[int, int], colour: tuple[int, int, int] = INK,
-               name: str | None = None) -> None:
-        """A side-view label at ``at`` (metres) + ``offset`` (px), drawn over everything else."""
-        self._labels.append((text, at, offset, colour, name))
+               name: str | None = None, on_shape: bool = False) -> None:
+        """A side-view label at ``at`` (metres) + ``offset`` (px), drawn over everything else; unless
+        ``on_shape``, moved to the nearest blank place around ``at`` when the offset lands on a drawing."""
+        self._labels.append((text, at, offset, colour, name, on_shape))
 
     def _draw_labels(self) -> None:
-        for text, at, offset, colour, name in self._labels:
+        for text, at, offset, colour, name, on_shape in self._labels:
             x, y = self.px(at)
-            self._text(text, (x + offset[0], y + offset[1]), 20, colour, name)
+            w, h = self.font(20).size(text)
+            place = (x + offset[0], y + offset[1])
+            if not on_shape and not self._blank((*place, w, h)):
+                place = next((c for c in _around((x, y), w, h) if self._blank((*c, w, h))), place)
+                if math.dist((x, y), (place[0] + w / 2, place[1] + h / 2)) > 0.5 * w + 20:
+                    near = (min(max(x, place[0] - 3), place[0] + w + 2), min(max(y, place[1] - 3), place[1] + h + 2))
+                    self.pg.draw.line(self.screen, (150, 150, 150), (x, y), near, 1)   # a leader to what it names
+            self._text(text, place, 20, colour, name or f"label:{text}")
         self._labels = []
+
+    def _blank(self, rect: Rect) -> bool:
+        """Whether ``rect`` lies inside the side view on nothing but its white panel (labels drawn so far included)."""
+        x, y, w, h = rect
+        if x < SIDE[0] + 2 or y < SIDE[1] + 30 or x + w > SIDE[0] + SIDE[2] - 2 or y + h > SIDE[1] + SIDE[3] - 24:
+            return False
+        pixels = self.pg.surfarray.pixels3d(self.screen)[x:x + w, y:y + h]
+        return bool((pixels == PANEL).all())
 
     def _wrapped(self, text: str, at: tuple[int, int], width: int, size: int, name: str | None = None) -> int:
         """Draw ``text`` wrapped to ``width`` px; returns the y below it."""
@@ -425,6 +457,17 @@ class PlayView:
             ends = [(float(np.interp(d, length, closed[:, 0])), float(np.interp(d, length, closed[:, 1])))
                     for d in (start, min(start + dash_px, length[-1]))]
             self.pg.draw.line(self.screen, colour, ends[0], ends[1], width)
+
+
+def _around(at: tuple[int, int], w: int, h: int) -> list[tuple[int, int]]:
+    """Top-left corners of a ``w`` x ``h`` label around ``at``, nearest first: right, left, above, below and
+    the corners, at growing gaps."""
+    x, y = at
+    out = []
+    for gap in (8, 20, 36, 56, 80):
+        out += [(x + gap, y - h // 2), (x - gap - w, y - h // 2), (x - w // 2, y - gap - h), (x - w // 2, y + gap),
+                (x + gap, y - gap - h), (x - gap - w, y - gap - h), (x + gap, y + gap), (x - gap - w, y + gap)]
+    return out
 
 
 def _by_angle(profile: np.ndarray) -> np.ndarray:
