@@ -1,7 +1,7 @@
 """Tune an agent's discount and learning rate with Optuna, on the training targets only.
 
     python scripts/tune_agents.py --algo ppo --scene SoftSphereHaptic-v0 --trials 16 [--timesteps N]
-        [--seeds 0] [--episodes 50] [--runs runs/tuning] [--out results/tuning]
+        [--seeds 0] [--episodes 50] [--confirm 3 --confirm-seeds 1 2 3 4] [--runs runs/tuning] [--out results/tuning]
 
 Each trial trains the agent (``softenv.baselines.agents.train_agent``, its YAML settings with the trial's
 ``gamma`` and ``learning_rate``) on every ``--seeds`` seed for ``--timesteps`` env steps (default: the
@@ -13,8 +13,14 @@ scale), its first 5 trials at random. The study is an SQLite file in ``--runs``,
 stopped search resumes: ``--trials`` is the total wanted, finished trials are kept, one cut short is
 marked failed and run again as a new trial.
 
-Writes ``<scene>__<algo>.md`` (every trial), ``.json`` and ``.yml`` (the YAML entry with the best
-trial's values, to adopt into ``softenv/baselines/hyperparams``) into ``--out``; one BLAS and torch thread.
+A search on few seeds picks its best partly by luck. ``--confirm K`` trains the K best trials and the
+YAML's values again on ``--confirm-seeds`` (seeds the search did not use) and decides by the seeds: the
+best of them by mean is adopted only when its 95 % interval over those seeds lies wholly below the
+YAML's (lower error); otherwise the YAML's values stay.
+
+Writes ``<scene>__<algo>.md`` (every trial, and the confirmation), ``.json`` and ``.yml`` (the YAML entry
+with the best trial's values, or with the confirmation's verdict, to adopt into
+``softenv/baselines/hyperparams``) into ``--out``; one BLAS and torch thread.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import optuna
 import torch
 import yaml
@@ -37,23 +44,51 @@ from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.bench import single_thread_environment, threads_pinned
 from softenv.bench.timing import code_revision
+from softenv.stats import bootstrap_ci
 
 GAMMAS = (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)
 LEARNING_RATES = (1e-5, 1e-3)
 
 
+def trained_error(args: argparse.Namespace, overrides: dict[str, float], number: int, seed: int) -> float:
+    """Train (or load the finished run of) trial ``number``'s values on ``seed``: its mean summed shape error
+    over the first ``--episodes`` training-target episodes."""
+    run_dir = args.runs / args.scene.replace("/", "_") / f"{args.algo}-trial{number}-seed{seed}"
+    model = train_agent(args.algo, args.scene, seed, run_dir, args.timesteps, progress=False, overrides=overrides)
+    played = evaluate(load_agent(model, args.scene), args.scene, args.episodes, list(range(args.episodes)),
+                      task={"split": "train"})
+    return float(played.values["error_sum_mm"].mean())
+
+
 def objective(trial: optuna.Trial, args: argparse.Namespace) -> float:
     overrides = {"gamma": trial.suggest_categorical("gamma", GAMMAS),
                  "learning_rate": trial.suggest_float("learning_rate", *LEARNING_RATES, log=True)}
-    errors = []
-    for seed in args.seeds:
-        run_dir = args.runs / args.scene.replace("/", "_") / f"{args.algo}-trial{trial.number}-seed{seed}"
-        model = train_agent(args.algo, args.scene, seed, run_dir, args.timesteps, progress=False, overrides=overrides)
-        played = evaluate(load_agent(model, args.scene), args.scene, args.episodes, list(range(args.episodes)),
-                          task={"split": "train"})
-        errors.append(float(played.values["error_sum_mm"].mean()))
+    errors = [trained_error(args, overrides, trial.number, seed) for seed in args.seeds]
     trial.set_user_attr("error_by_seed", errors)
     return sum(errors) / len(errors)
+
+
+def confirm(finished: list[optuna.trial.FrozenTrial], args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The ``--confirm`` best trials and the YAML's, each trained on every ``--confirm-seeds`` seed: their
+    errors by seed and mean with its 95 % bootstrap interval over the seeds, best mean first."""
+    ranked = sorted(finished, key=lambda t: t.value)
+    chosen = ranked[:args.confirm] + [t for t in ranked[args.confirm:] if t.user_attrs.get("yaml")]
+    rows = []
+    for t in chosen:
+        errors = [trained_error(args, t.params, t.number, seed) for seed in args.confirm_seeds]
+        mean, low, high = bootstrap_ci(np.array(errors))
+        rows.append({"number": t.number, "yaml": bool(t.user_attrs.get("yaml")), **t.params,
+                     "error_by_seed": errors, "mean": mean, "ci_low": low, "ci_high": high})
+        print(f"confirm trial {t.number}: mean error sum {mean:.2f} [{low:.2f}, {high:.2f}] over seeds "
+              f"{args.confirm_seeds}", flush=True)
+    return sorted(rows, key=lambda r: r["mean"])
+
+
+def verdict(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The confirmation's choice: its best row when that row's interval lies wholly below the YAML's,
+    else the YAML's row."""
+    best, own = rows[0], next(r for r in rows if r["yaml"])
+    return best if best["ci_high"] < own["ci_low"] else own
 
 
 def main() -> None:
@@ -67,12 +102,18 @@ def main() -> None:
     parser.add_argument("--timesteps", type=int, default=None, help="env steps a trial trains (default: the YAML's)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--episodes", type=int, default=50, help="training-target episodes a trial is scored on")
+    parser.add_argument("--confirm", type=int, default=0, help="best trials trained again on --confirm-seeds (0: none)")
+    parser.add_argument("--confirm-seeds", type=int, nargs="+", default=[1, 2, 3, 4])
     parser.add_argument("--runs", type=Path, default=Path("runs/tuning"))
     parser.add_argument("--out", type=Path, default=Path("results/tuning"))
     args = parser.parse_args()
     for name in ("trials", "episodes"):
         if getattr(args, name) < 1:
             parser.error(f"--{name} {getattr(args, name)}: must be >= 1")
+    if not 0 <= args.confirm <= args.trials:
+        parser.error(f"--confirm {args.confirm}: must be from 0 to --trials ({args.trials})")
+    if args.confirm and (len(args.confirm_seeds) < 2 or set(args.confirm_seeds) & set(args.seeds)):
+        parser.error(f"--confirm-seeds {args.confirm_seeds}: give at least 2 seeds, none of --seeds {args.seeds}")
     env_id = scene_kwargs(args.scene)[0]
     yaml_params = hyperparams(args.algo, env_id)
     budget = args.timesteps or int(yaml_params["n_timesteps"])
@@ -98,8 +139,11 @@ def main() -> None:
         print(f"trial {trial.number}: gamma {trial.params['gamma']}, learning_rate {trial.params['learning_rate']:.3g}: "
               f"mean error sum {value:.2f} mm-steps", flush=True)
     best = study.best_trial
+    confirmed = confirm(finished, args) if args.confirm else []
+    choice = verdict(confirmed) if confirmed else {"number": best.number, **best.params}
     stem = f"{args.scene.replace('/', '_')}__{args.algo}"
-    tuned = {**{k: v for k, v in yaml_params.items() if k != "env_kwargs"}, **best.params,
+    tuned = {**{k: v for k, v in yaml_params.items() if k != "env_kwargs"},
+             "gamma": choice["gamma"], "learning_rate": choice["learning_rate"],
              "n_timesteps": int(yaml_params["n_timesteps"])}
     header = (f"# Tuning {args.algo} on {args.scene}\n\nMade by `{command}` at {code_revision()} "
               f"({(time.perf_counter() - started) / 60:.1f} min this call; {len(finished)} finished trials). "
@@ -117,15 +161,32 @@ def main() -> None:
                  f"{best.params['learning_rate']:.3g} (mean error sum {best.value:.2f}); its YAML entry: `{stem}.yml`. "
                  f"Each trial is {len(args.seeds)} training seed(s): trials closer than the spread between seeds are "
                  "not told apart by this search.\n")
-    write_text(args.out / f"{stem}.md", header + "\n" + "\n".join(rows) + "\n" + best_line)
+    confirmation = ""
+    if confirmed:
+        kept = choice["yaml"]
+        confirmation = (
+            f"\n## Confirmation on seeds {args.confirm_seeds}\n\nThe {args.confirm} best trials and the YAML's values, "
+            f"each trained again on seeds the search did not use; mean summed shape error [95 % bootstrap interval "
+            "over the seeds]:\n\n| trial | gamma | learning_rate | mean error sum | by seed |\n|---|---|---|---|---|\n"
+            + "".join(f"| {r['number']}{' (the YAML)' if r['yaml'] else ''} | {r['gamma']} | {r['learning_rate']:.3g} "
+                      f"| {r['mean']:.2f} [{r['ci_low']:.2f}, {r['ci_high']:.2f}] | "
+                      f"{', '.join(f'{e:.2f}' for e in r['error_by_seed'])} |\n" for r in confirmed)
+            + ("\nVerdict: keep the YAML's values: no trial's interval lies wholly below the YAML's, so the seeds do "
+               "not tell them apart from it.\n" if kept else
+               f"\nVerdict: adopt trial {choice['number']} (gamma {choice['gamma']}, learning_rate "
+               f"{choice['learning_rate']:.3g}): its interval lies wholly below the YAML's; `{stem}.yml` carries it.\n"))
+    write_text(args.out / f"{stem}.md", header + "\n" + "\n".join(rows) + "\n" + best_line + confirmation)
     record: dict[str, Any] = {"command": command, "commit": code_revision(), "timesteps": budget, "seeds": args.seeds,
                               "episodes": args.episodes, "best": {"number": best.number, **best.params,
                                                                    "value": best.value},
                               "trials": [{"number": t.number, **t.params, "value": t.value, **t.user_attrs}
-                                         for t in finished]}
+                                         for t in finished],
+                              "confirm_seeds": args.confirm_seeds if confirmed else [], "confirmation": confirmed,
+                              "chosen": choice}
     write_text(args.out / f"{stem}.json", json.dumps(record, indent=1))
-    write_text(args.out / f"{stem}.yml", f"# {command} at {code_revision()}: trial {best.number} of "
-               f"{len(finished)}\n" + yaml.safe_dump({env_id: tuned}, sort_keys=False))
+    write_text(args.out / f"{stem}.yml", f"# {command} at {code_revision()}: trial {choice['number']} of "
+               f"{len(finished)}{' (the confirmation kept the YAML)' if choice.get('yaml') else ''}\n"
+               + yaml.safe_dump({env_id: tuned}, sort_keys=False))
     print(f"wrote {args.out / stem}.md, .json and .yml")
 
 

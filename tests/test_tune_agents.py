@@ -13,10 +13,10 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _tune(tmp_path: Path, trials: int) -> subprocess.CompletedProcess:
+def _tune(tmp_path: Path, trials: int, *more: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "scripts/tune_agents.py", "--algo", "ppo", "--scene", "SoftSphere-v0",
                            "--trials", str(trials), "--timesteps", "64", "--episodes", "3", "--runs",
-                           str(tmp_path / "runs"), "--out", str(tmp_path / "out")],
+                           str(tmp_path / "runs"), "--out", str(tmp_path / "out"), *more],
                           cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
@@ -39,3 +39,20 @@ def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     assert entry["n_timesteps"] == 300_000                   # the YAML's budget, not the search's
     for trial in record["trials"]:                           # its score is its own agent's, on training targets
         assert trial["value"] == sum(trial["error_by_seed"]) / len(trial["error_by_seed"]) > 0
+    # the confirmation: the best trial and the YAML's trained again on two other seeds, decided by their intervals
+    bad = _tune(tmp_path, 3, "--confirm", "1", "--confirm-seeds", "0", "5")
+    assert bad.returncode == 2 and "--confirm-seeds [0, 5]" in bad.stderr and "none of --seeds [0]" in bad.stderr
+    confirmed = _tune(tmp_path, 3, "--confirm", "1", "--confirm-seeds", "1", "2")
+    assert confirmed.returncode == 0, confirmed.stderr[-2000:]
+    record = json.loads((tmp_path / "out" / "SoftSphere-v0__ppo.json").read_text())
+    rows = {r["number"]: r for r in record["confirmation"]}
+    assert set(rows) == {best["number"], 0} and record["confirm_seeds"] == [1, 2]
+    for r in rows.values():
+        assert len(r["error_by_seed"]) == 2 and r["mean"] == sum(r["error_by_seed"]) / 2
+        assert r["ci_low"] <= r["mean"] <= r["ci_high"]
+    top = min(rows.values(), key=lambda r: r["mean"])
+    expected = top if top["ci_high"] < rows[0]["ci_low"] else rows[0]
+    assert record["chosen"]["number"] == expected["number"]
+    entry = yaml.safe_load((tmp_path / "out" / "SoftSphere-v0__ppo.yml").read_text())["SoftSphere-v0"]
+    assert (entry["gamma"], entry["learning_rate"]) == (expected["gamma"], expected["learning_rate"])
+    assert "## Confirmation on seeds [1, 2]" in (tmp_path / "out" / "SoftSphere-v0__ppo.md").read_text()
