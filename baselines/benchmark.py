@@ -57,6 +57,7 @@ class Plan:
 
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
+SHAC = "shac"                    # baselines/shac.py: the first-order agent (differentiable torch twin), on request
 GRADIENT_PLANNER = "gradient"    # baselines/gradient_planner.py: a planner on request (--policies gradient), as costly as the oracle
 POLICIES = (*BASELINES, GRADIENT_PLANNER)
 OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's methods (torchrl: the offline extra)
@@ -64,7 +65,7 @@ OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's 
 # here are short-budget ones (docs/datasets.md says so beside them)
 OFFLINE_STEPS = {"bc": 5_000, "td3bc": 10_000}
 OFFLINE_AGENTS = tuple(f"{method}-{kind}" for method in OFFLINE_METHODS for kind in KINDS)   # bc-expert: BC on expert-v0
-AGENTS = (*ALGOS, TORCH_PPO, *OFFLINE_AGENTS)
+AGENTS = (*ALGOS, TORCH_PPO, SHAC, *OFFLINE_AGENTS)
 
 
 def offline_parts(agent: str) -> tuple[str, str]:
@@ -152,7 +153,8 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
         for name in scene_baselines(plan, scene):
             out.append(Job(f"{scene} {name}", baseline_job, (name, scene, plan.episodes)))
         for algo in plan.agents if not plan.train_on else ():
-            fn = torch_agent_job if algo == TORCH_PPO else offline_agent_job if algo in OFFLINE_AGENTS else agent_job
+            fn = torch_agent_job if algo == TORCH_PPO else shac_agent_job if algo == SHAC else \
+                offline_agent_job if algo in OFFLINE_AGENTS else agent_job
             extra = (plan.dataset_episodes,) if algo in OFFLINE_AGENTS else ()
             for seed in range(plan.seeds[scene]):
                 run_dir = runs_dir / scene.replace("/", "_") / f"{algo}-{seed}"
@@ -165,7 +167,7 @@ def jobs(plan: Plan, runs_dir: Path) -> list[Job]:
                 out.append(Job(transfer_key(scene, algo, seed), transfer_job,
                                (algo, scene, seed, str(run_dir), plan.timesteps.get(algo), plan.episodes,
                                 tuple(plan.scenes))))
-    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, offline_agent_job, transfer_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
+    expected = lambda job: 0 if job.fn in (agent_job, torch_agent_job, shac_agent_job, offline_agent_job, transfer_job) else 1 if job.fn is anchor_job or job.args[0].startswith("invert-") \
         or job.args[0] == GRADIENT_PLANNER \
         else 2  # noqa: E731
     return sorted(out, key=expected)
@@ -232,6 +234,24 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
         path.parent.mkdir(parents=True, exist_ok=True)
         ppo_torch.save(agent, args, path)
     return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
+
+
+def shac_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
+    """Train (or load) one SHAC agent (``baselines/shac.py``) through the differentiable torch twin on CPU
+    tensors, and evaluate it; its learning curve as :func:`agent_job`'s."""
+    from . import shac                                      # torch: the rl extra
+
+    _torch_single_thread()
+    args = shac.ShacArgs(scene=scene, seed=seed)
+    if budget is not None:
+        args.total_timesteps = budget
+    path = Path(run_dir) / "shac.pt"
+    try:
+        agent = shac.load(path, args)
+    except (FileNotFoundError, ValueError):                 # none yet, or of other settings: train it
+        agent, _ = shac.train(args, Path(run_dir), log=lambda line: None)
+        shac.save(agent, args, path)
+    return evaluate(shac.as_policy(agent), scene, episodes), learning_curve(Path(run_dir))
 
 
 def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
@@ -374,6 +394,8 @@ def agent_budget(plan: Plan, algo: str, scene: str) -> int:
         return given
     if algo in OFFLINE_AGENTS:
         return OFFLINE_STEPS[offline_parts(algo)[0]]
+    if algo == SHAC:
+        return _shac_budget()
     return _torch_ppo_budget() if algo == TORCH_PPO else int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
 
 
@@ -381,13 +403,20 @@ def _agent_kind(plan: Plan, algo: str, scene: str) -> str:
     steps = agent_budget(plan, algo, scene)
     if algo in OFFLINE_AGENTS:
         return f"offline ({steps:,} gradient steps on {offline_parts(algo)[1]}-v0, {plan.dataset_episodes} episodes)"
-    return f"agent ({steps:,} steps" + (f", torch on {torch_device()})" if algo == TORCH_PPO else ")")
+    how = f", torch on {torch_device()}" if algo == TORCH_PPO else ", first-order" if algo == SHAC else ""
+    return f"agent ({steps:,} steps{how})"
 
 
 def _torch_ppo_budget() -> int:
     from .ppo_torch import Args                             # torch: the rl extra
 
     return Args.total_timesteps
+
+
+def _shac_budget() -> int:
+    from .shac import ShacArgs                              # torch: the rl extra
+
+    return ShacArgs.total_timesteps
 
 
 def _listed(value: Any) -> str:
@@ -707,7 +736,7 @@ def policy_style(name: str, plt: Any) -> dict[str, Any]:
 
 def agent_colours(agents: list[str], plt: Any) -> dict[str, Any]:
     """One colour per agent in every report, whichever agents a plan trains."""
-    known = [*ALGOS, TORCH_PPO]
+    known = [*ALGOS, TORCH_PPO, SHAC]
     colours = {algo: plt.get_cmap("tab10").colors[i] for i, algo in enumerate(known)}
     colours |= {algo: plt.get_cmap("tab20").colors[i] for i, algo in enumerate(OFFLINE_AGENTS)}   # 12 more
     return {algo: colours[algo] for algo in agents}

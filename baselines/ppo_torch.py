@@ -31,7 +31,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -231,10 +231,18 @@ def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
     return agent, {"wall_s": wall, "steps_per_s": iterations * batch / wall, "env_steps": iterations * batch}
 
 
+class Actor(Protocol):
+    """What :class:`TorchPolicy` needs of an agent (this module's :class:`Agent`, ``baselines/shac.py``'s)."""
+
+    def cpu(self) -> Any: ...
+
+    def deterministic(self, obs: torch.Tensor) -> torch.Tensor: ...
+
+
 class TorchPolicy:
     """A trained agent behind the baselines' ``predict(obs) -> action`` (numpy in and out; deterministic)."""
 
-    def __init__(self, agent: Agent, name: str = "ppo-torch") -> None:
+    def __init__(self, agent: Actor, name: str = "ppo-torch") -> None:
         self.agent = agent.cpu().eval()
         self.name = name
 
