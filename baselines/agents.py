@@ -141,6 +141,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
         pass
     model.set_logger(configure(str(partial / "logs"), formats))
     eval_env = make_training_env(algo, scene, min(eval_episodes, 10), split="test")
+    eval_env.seed(seed)                          # else its first reset draws from entropy: the curve would not repeat
     callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
                             log_path=str(partial / "eval"), best_model_save_path=str(partial / "best"), verbose=0)
     try:

@@ -126,6 +126,9 @@ def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(
         "agent.json", "best", "eval", "logs", "model.zip"]
     for a, b in zip(_weights(whole), _weights(path), strict=True):
         np.testing.assert_array_equal(a, b)          # bit for bit the run that was never stopped
+    curves = [np.load(run / "eval" / "evaluations.npz")["results"] for run in (tmp_path / "whole", out)]
+    assert curves[0].size >= 2 and np.ptp(curves[0]) > 0
+    np.testing.assert_array_equal(*curves)           # its learning curve too: the evaluation env is seeded
     # a finished run is reused; one of another budget is replaced by a fresh run
     stamp = path.stat().st_mtime_ns
     assert train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1100, progress=False) == path
