@@ -196,8 +196,8 @@ def report(cases: dict[str, Any], made: dict[str, Any]) -> str:
              f"along the exact gradient's unit direction (1-D smoothing on that line), first-order and zeroth-order "
              f"from {made['line_samples']} draws ({made['line_samples'] // 2} antithetic pairs), each ± its standard "
              f"error, beside the exact slope (the gradient's norm): where the two estimates part, J jumps on that "
-             f"line within a few T. Downhill: the exact J along the unit direction opposite a gradient, at steps {steps} in z's norm; the best change "
-             f"and its step.", "",
+             f"line within a few T. Downhill: the exact J along the unit direction opposite a gradient, at steps "
+             f"{steps} in z's norm; the best change and its step.", "",
              "| case | episode | exact J | exact gradient: norm, zero entries | downhill, exact gradient |",
              "|---|---|---|---|---|"]
     for name, case in cases.items():
