@@ -1,5 +1,7 @@
 """Numbers in prose come from the results they cite: in every paragraph or list item of a checked document
-that names a file under ``results/``, each decimal number (and each number with a thousands separator)
+that names a file under ``results/`` (and in a table right below such a paragraph, which it introduces),
+each decimal number (and each number with a thousands separator; a table's "target" column, a goal
+the results are held to, is not a claim)
 must be one of the cited files' numbers, rounded as the prose writes it (``70.6 M`` or ``70.6 million``
 for 70,6xx,xxx; ``7.9e-5`` for 7.93e-05), and each estimate with its interval (``98.7 [98.4, 99.0]``) must
 be one the files print whole, so a mean cannot be paired with another row's interval.
@@ -27,13 +29,14 @@ _TEXT = {".md", ".json", ".csv", ".txt"}
 
 
 def blocks(text: str) -> list[str]:
-    """Paragraphs and list items, outside fenced code."""
+    """Paragraphs, list items, headings and tables (a table's rows together), outside fenced code."""
     out: list[str] = []
     current: list[str] = []
     fenced = False
     for line in text.splitlines():
+        in_table = bool(current) and current[0].startswith("|") and line.startswith("|")
         starts = not line.strip() or re.match(r"^\s{0,2}[-*] ", line) or line.startswith(("#", "|", "```"))
-        if starts and current:
+        if starts and current and not in_table:
             out.append("\n".join(current))
             current = []
         if line.startswith("```"):
@@ -41,6 +44,13 @@ def blocks(text: str) -> list[str]:
         elif not fenced and line.strip():
             current.append(line)
     return out + (["\n".join(current)] if current else [])
+
+
+def without_targets(table: str) -> str:
+    """A table's rows less the cells under a "target" header."""
+    rows = [line.strip().strip("|").split("|") for line in table.splitlines()]
+    keep = [i for i, cell in enumerate(rows[0]) if cell.strip().lower() != "target"]
+    return "\n".join("| " + " | ".join(row[i].strip() for i in keep if i < len(row)) + " |" for row in rows)
 
 
 def cited_files(block: str) -> list[Path]:
@@ -70,8 +80,13 @@ def matches(claim: str, suffix: str, source: set[float]) -> bool:
 
 def mismatches(document: str) -> list[str]:
     found = []
+    introduced: list[Path] = []                  # what the paragraph above a table cites
     for block in blocks((ROOT / document).read_text(encoding="utf-8")):
         files = cited_files(block)
+        if block.startswith("|"):
+            files, block = files or introduced, without_targets(block)
+        else:
+            introduced = [] if block.startswith("#") else files
         if not files:
             continue
         text = "\n".join(f.read_text(encoding="utf-8", errors="replace") for f in files)
@@ -99,3 +114,5 @@ def test_the_check_finds_a_number_its_results_do_not_hold() -> None:
     assert not matches("8.0e-5", "", source)
     assert _TRIPLE.findall("PPO 98.7 [98.4, 99.0] above") == [("98.7", "98.4", "99.0")]
     assert blocks("a 1.5\nb\n\n- c 2.5\n- d\n```\n3.5\n```\ne") == ["a 1.5\nb", "- c 2.5", "- d", "e"]
+    assert blocks("a\n| x |\n|---|\n| 1.5 |\n\nb") == ["a", "| x |\n|---|\n| 1.5 |", "b"]
+    assert without_targets("| what | target |\n|---|---|\n| 1.5 | >= 2.5 |") == "| what |\n| --- |\n| 1.5 |"
