@@ -1,6 +1,6 @@
 """What does smoothing cost and buy? Randomized smoothing's bias against the exact step, on both devices.
 
-    python scripts/smoothing_bias.py --out results/smoothing [--episodes 2] [--samples 32] [--line-samples 128]
+    python scripts/smoothing_bias.py --out results/smoothing [--cases ...] [--episodes 2] [--samples 32] [--line-samples 128]
 
 The objective is a planner's: an episode's summed shape error under the plan ``tanh(z)``, through the
 differentiable torch twin (softenv.smoothing; docs/gradients.md). On training-target episodes, at each
@@ -139,6 +139,7 @@ def main() -> None:
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
     parser.add_argument("--episodes", type=int, default=2)
     parser.add_argument("--samples", type=int, default=32)
     parser.add_argument("--line-samples", type=int, default=128)
@@ -148,7 +149,8 @@ def main() -> None:
     started = time.perf_counter()
     seeds = list(range(args.episodes))
     cases: dict[str, Any] = {}
-    for name, (scene, noise) in CASES.items():
+    for name in args.cases:
+        scene, noise = CASES[name]
         plans = start_plans(scene, noise, seeds)
         cases[name] = {"scene": scene, "noise": noise, "episodes": []}
         for seed, plan in zip(seeds, plans):

@@ -1,6 +1,11 @@
 """Randomized smoothing (softenv/smoothing.py) against closed forms of Gaussian-smoothed functions, through the
 differentiable twin, and bad settings refused by name."""
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -10,6 +15,7 @@ from scipy.stats import norm
 import softenv  # noqa: F401  (registers the ids)
 from softenv.smoothing import smoothed_gradient
 
+ROOT = Path(__file__).resolve().parent.parent
 X = torch.tensor([-0.3, 0.05, 0.4], dtype=torch.float64)
 T = 0.2
 
@@ -89,3 +95,18 @@ def test_bad_settings_are_refused_by_name(kwargs, match):
     settings = {"objective": _absolute, "x": X, "temperature": T, "samples": 4, "estimator": "first-order", **kwargs}
     with pytest.raises(ValueError, match=match):
         smoothed_gradient(**settings)
+
+
+def test_the_bias_script_at_its_smallest_measures_a_bias_that_grows_with_the_temperature(tmp_path):
+    """``scripts/smoothing_bias.py`` on the ideal device: J_T moves further from J at the larger temperature,
+    the smoothed gradient keeps the exact one's direction, and both lead downhill."""
+    done = subprocess.run([sys.executable, "scripts/smoothing_bias.py", "--out", str(tmp_path), "--cases",
+                           "ideal, reach from no force", "--episodes", "1", "--samples", "4", "--line-samples", "8",
+                           "--temperatures", "0.01", "0.3"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    episode = json.loads((tmp_path / "results.json").read_text())["cases"]["ideal, reach from no force"]["episodes"][0]
+    low, high = episode["temperatures"]
+    assert 0 <= low["bias"] < high["bias"]                       # a convex-looking J: noise raises it, more with T
+    assert low["first_vs_exact_cosine"] > 0.99
+    assert episode["exact_downhill"]["best_change"] < 0 and low["first_downhill"]["best_change"] < 0
+    assert "| ideal, reach from no force | 0 | 0.3 |" in (tmp_path / "README.md").read_text()
