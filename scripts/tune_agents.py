@@ -8,10 +8,11 @@ Each trial trains the agent (``softenv.baselines.agents.train_agent``, its YAML 
 YAML budget), and scores it by the mean summed shape error of its ``--episodes`` first training-target
 episodes (the score's ``E``; lower is better): the test targets the benchmark reports are never seen.
 The first trial is the YAML's own values, so the search is measured against them; then Optuna's TPE
-sampler (seed 0) proposes ``gamma`` from 0.9 to 0.999 and ``learning_rate`` from 1e-5 to 1e-3 (log
+sampler (seeded by the number of finished trials before each proposal) proposes ``gamma`` from 0.9 to 0.999 and ``learning_rate`` from 1e-5 to 1e-3 (log
 scale), its first 5 trials at random. The study is an SQLite file in ``--runs``, so a
 stopped search resumes: ``--trials`` is the total wanted, finished trials are kept, one cut short is
-marked failed and run again as a new trial.
+marked failed and run again as a new trial with the same proposal, so the resumed search is the unstopped
+one.
 
 A search on few seeds picks its best partly by luck. ``--confirm K`` trains the K best trials and the
 YAML's values again on ``--confirm-seeds`` (seeds the search did not use) and decides by the seeds: the
@@ -123,7 +124,7 @@ def main() -> None:
     study = optuna.create_study(
         study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes}",
         storage=f"sqlite:///{(args.runs / 'tuning.db').resolve()}", direction="minimize", load_if_exists=True,
-        sampler=optuna.samplers.TPESampler(seed=0, n_startup_trials=5))
+        sampler=optuna.samplers.TPESampler(seed=0, n_startup_trials=5))    # reseeded before each trial (below)
     for cut in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         study.tell(cut.number, state=optuna.trial.TrialState.FAIL)        # a run that was stopped
     chosen = {"gamma": yaml_params["gamma"], "learning_rate": yaml_params["learning_rate"]}
@@ -131,6 +132,9 @@ def main() -> None:
         study.enqueue_trial(chosen, user_attrs={"yaml": True})     # the values the search must beat
     started = time.perf_counter()
     while len(finished := study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))) < args.trials:
+        # a sampler seeded by the finished trials' count proposes what an unstopped search would have
+        # proposed next: a resumed search is the same search (one seeded once would start its stream again)
+        study.sampler = optuna.samplers.TPESampler(seed=len(finished), n_startup_trials=5)
         trial = study.ask()
         began = time.perf_counter()
         value = objective(trial, args)

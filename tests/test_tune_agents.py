@@ -1,5 +1,6 @@
 """``scripts/tune_agents.py`` at its smallest: Optuna's trials train and score agents on the training
-targets, the search resumes from its study file, and the YAML it writes is the best trial's."""
+targets, the search resumes from its study file as the search that never stopped, and the YAML it writes
+is the best trial's."""
 
 from __future__ import annotations
 
@@ -29,6 +30,12 @@ def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     assert [line.split(":")[0] for line in again.stdout.splitlines() if line.startswith("trial ")] == ["trial 2"]
     record = json.loads((tmp_path / "out" / "SoftSphere-v0__ppo.json").read_text())
     assert len(record["trials"]) == 3
+    whole = _tune(tmp_path / "whole", 3)           # the same search, never stopped: the same proposals and scores
+    assert whole.returncode == 0, whole.stderr[-2000:]
+    unstopped = json.loads((tmp_path / "whole" / "out" / "SoftSphere-v0__ppo.json").read_text())["trials"]
+    assert [(t["gamma"], t["learning_rate"], t["value"]) for t in unstopped] == \
+        [(t["gamma"], t["learning_rate"], t["value"]) for t in record["trials"]]
+    assert len({(t["gamma"], t["learning_rate"]) for t in record["trials"]}) == 3
     first = record["trials"][0]                    # the YAML's own values, scored the same way
     assert first["number"] == 0 and first["yaml"] and (first["gamma"], first["learning_rate"]) == (0.95, 3e-4)
     best = min(record["trials"], key=lambda t: t["value"])
