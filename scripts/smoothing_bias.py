@@ -167,21 +167,28 @@ def main() -> None:
 
 
 def figure(cases: dict[str, Any], temperatures: list[float], path: Path) -> None:
-    fig, (bias, cos) = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, (bias, cos, slope) = plt.subplots(1, 3, figsize=(15, 4.4))
     for c, (name, case) in enumerate(cases.items()):
         for k, episode in enumerate(case["episodes"]):
-            rows = episode["temperatures"]
-            label = name if k == 0 else None
-            bias.plot(temperatures, [100 * r["relative_bias"] for r in rows], "o-", color=f"C{c}", label=label)
-            cos.plot(temperatures, [r["first_vs_exact_cosine"] for r in rows], "o-", color=f"C{c}", label=label)
-            cos.plot(temperatures, [r["along_zeroth"] / episode["exact_gradient_norm"] for r in rows], "s:",
-                     color=f"C{c}")
+            rows, norm = episode["temperatures"], episode["exact_gradient_norm"]
+            label, style = (name if k == 0 else None), ("o-" if k == 0 else "s--")
+            bias.plot(temperatures, [100 * r["relative_bias"] for r in rows], style, color=f"C{c}", label=label)
+            cos.plot(temperatures, [r["first_vs_exact_cosine"] for r in rows], style, color=f"C{c}")
+            for key, shift, marker in (("first", 0.97, "o"), ("zeroth", 1.03, "^")):
+                slope.errorbar([t * shift for t in temperatures], [r[f"along_{key}"] / norm for r in rows],
+                               yerr=[r[f"along_{key}_stderr"] / norm for r in rows], fmt=marker,
+                               ls="-" if key == "first" else ":", color=f"C{c}", capsize=2, ms=4)
     bias.set(xscale="log", yscale="symlog", xlabel="temperature T (spread of the noise on z)",
              ylabel="bias of J_T against J (%)", title="The smoothed objective against the exact one")
     bias.axhline(0, color="0.6", lw=0.8)
-    bias.legend(fontsize=8)
-    cos.set(xscale="log", xlabel="temperature T", ylabel="cosine; slope over the exact gradient's norm",
-            title="First-order vs exact gradient (solid); J_T's slope along\nthe exact gradient, zeroth-order (dotted)")
+    bias.legend(fontsize=8, title="episode 0 solid, 1 dashed", title_fontsize=8)
+    cos.set(xscale="log", ylim=(-0.3, 1.05), xlabel="temperature T",
+            ylabel="cosine", title="First-order smoothed gradient vs exact")
+    slope.set(xscale="log", xlabel="temperature T", ylabel="slope over the exact slope (gradient norm)",
+              title="J_T's slope along the exact gradient:\nfirst-order (o, solid), zeroth-order (^, dotted)")
+    slope.axhline(1, color="0.6", lw=0.8)
+    slope.text(0.02, 0.02, "bars: one standard error", transform=slope.transAxes, fontsize=8)
+    fig.suptitle("randomized smoothing against the exact step -- python scripts/smoothing_bias.py", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=110)
 
