@@ -1,6 +1,7 @@
 """What does smoothing cost and buy? Randomized smoothing's bias against the exact step, on both devices.
 
-    python scripts/smoothing_bias.py --out results/smoothing [--cases ...] [--episodes 2] [--samples 32] [--line-samples 128]
+    python scripts/smoothing_bias.py --out results/smoothing [--cases ...] [--episodes 2] [--samples 32]
+        [--line-samples 128]
 
 The objective is a planner's: an episode's summed shape error under the plan ``tanh(z)``, through the
 differentiable torch twin (softenv.smoothing; docs/gradients.md). On training-target episodes, at each
@@ -50,7 +51,7 @@ from softenv.baselines.planner import warm_start_actions  # noqa: E402
 from softenv.bench import single_thread_environment, threads_pinned  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
-from softenv.smoothing import smoothed_gradient  # noqa: E402
+from softenv.smoothing import SmoothedGradient, smoothed_gradient  # noqa: E402
 
 CASES = {                    # name: (scene, noise on the warm start's z)
     "ideal, reach from no force": ("SoftSphere-v0", 0.0),
@@ -85,38 +86,41 @@ def start_plans(scene: str, noise: float, seeds: list[int]) -> np.ndarray:
     return z + noise * np.random.default_rng(0).standard_normal(z.shape)
 
 
+def unit(v: torch.Tensor) -> torch.Tensor:
+    return v / max(float(v.norm()), 1e-300)
+
+
 def cosine(a: torch.Tensor, b: torch.Tensor) -> float:
-    return float((a * b).sum() / max(float(a.norm() * b.norm()), 1e-300))
+    return float((unit(a) * unit(b)).sum())
 
 
-def relative_stderr(got: Any) -> float:
+def relative_stderr(got: SmoothedGradient) -> float:
     return float(got.gradient_stderr.norm() / max(float(got.gradient.norm()), 1e-300))
 
 
 def measure(episode: Callable[[torch.Tensor], torch.Tensor], z: torch.Tensor, temperatures: list[float],
             samples: int, line_samples: int, seed: int) -> dict[str, Any]:
     exact = smoothed_gradient(episode, z, 0.0, 1)
-    unit = exact.gradient / max(float(exact.gradient.norm()), 1e-300)
+    line = unit(exact.gradient)
 
     def along(steps: torch.Tensor) -> torch.Tensor:     # J at z moved by each step along the exact gradient
-        return episode(z + steps.reshape(-1, *([1] * z.dim())) * unit)
+        return episode(z + steps.reshape(-1, *([1] * z.dim())) * line)
 
     rows = []
     for temperature in temperatures:
         first = smoothed_gradient(episode, z, temperature, samples, "first-order",
                                   torch.Generator().manual_seed(seed))
-        line = {estimator: smoothed_gradient(along, torch.zeros(1, dtype=z.dtype), temperature, line_samples, estimator,
-                                             torch.Generator().manual_seed(seed + 1))
-                for estimator in ("first-order", "zeroth-order")}
-        rows.append({"temperature": temperature, "smoothed": first.value, "smoothed_stderr": first.value_stderr,
-                     "bias": first.value - exact.value, "relative_bias": (first.value - exact.value) / exact.value,
-                     "first_vs_exact_cosine": cosine(first.gradient, exact.gradient),
-                     "first_relative_stderr": relative_stderr(first),
-                     "first_downhill": downhill(episode, z, first.gradient, exact.value),
-                     **{f"along_{key}": float(got.gradient[0]) for key, got in (("first", line["first-order"]),
-                                                                                ("zeroth", line["zeroth-order"]))},
-                     **{f"along_{key}_stderr": float(got.gradient_stderr[0])
-                        for key, got in (("first", line["first-order"]), ("zeroth", line["zeroth-order"]))}})
+        bias = first.value - exact.value
+        row = {"temperature": temperature, "smoothed": first.value, "smoothed_stderr": first.value_stderr,
+               "bias": bias, "relative_bias": bias / exact.value,
+               "first_vs_exact_cosine": cosine(first.gradient, exact.gradient),
+               "first_relative_stderr": relative_stderr(first),
+               "first_downhill": downhill(episode, z, first.gradient, exact.value)}
+        for key in ("first", "zeroth"):
+            slope = smoothed_gradient(along, torch.zeros(1, dtype=z.dtype), temperature, line_samples,
+                                      f"{key}-order", torch.Generator().manual_seed(seed + 1))
+            row[f"along_{key}"], row[f"along_{key}_stderr"] = float(slope.gradient[0]), float(slope.gradient_stderr[0])
+        rows.append(row)
     return {"exact": exact.value, "exact_gradient_norm": float(exact.gradient.norm()),
             "exact_gradient_zero_fraction": float((exact.gradient == 0).double().mean()),
             "exact_downhill": downhill(episode, z, exact.gradient, exact.value), "temperatures": rows}
@@ -126,7 +130,7 @@ def downhill(episode: Callable[[torch.Tensor], torch.Tensor], z: torch.Tensor, g
              value: float) -> dict[str, Any]:
     """The exact ``J`` along the unit direction opposite ``gradient`` at :data:`STEPS`, less ``value`` (``J(z)``):
     each step's change, and the best (most negative) with its step."""
-    direction = -gradient / max(float(gradient.norm()), 1e-300)
+    direction = -unit(gradient)
     with torch.no_grad():
         changes = [float(j) - value for j in episode(torch.stack([z + step * direction for step in STEPS]))]
     best = int(np.argmin(changes))
