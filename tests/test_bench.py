@@ -124,3 +124,28 @@ def test_the_gradients_section_times_an_episode_backward_and_its_graph_on_both_d
     ratio, memory = rows[0], rows[1]
     assert ratio.unit == "x the forward step" and ratio.target == "<= 3x" and ratio.ok == (ratio.value <= 3.0)
     assert memory.unit == "MB" and "KB an env-step" in memory.spread
+
+
+def test_the_speed_comparison_script_times_both_trees_side_by_side(tmp_path):
+    """``scripts/speed_against.py`` against this very commit (a worktree of HEAD): a row per workload and
+    size, each side's rate the median of its rounds, the ratio theirs, the reference's commit named, and
+    the temporary worktree gone afterwards."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    done = subprocess.run([sys.executable, "scripts/speed_against.py", "--ref", "HEAD", "--rounds", "2",
+                           "--sizes", "8", "--out", str(tmp_path)], cwd=root, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    data = json.loads((tmp_path / "results.json").read_text())
+    head = subprocess.run(["git", "-C", root, "rev-parse", "--short=12", "HEAD"], capture_output=True,
+                          text=True, check=True).stdout.strip()
+    assert data["reference_commit"] == head
+    assert [(r["workload"], r["envs"]) for r in data["rows"]] == [("random", 8), ("pressing", 8)]
+    for row in data["rows"]:
+        assert len(row["reference"]) == len(row["this_commit"]) == 2 and min(row["reference"]) > 0
+        assert row["ratio"] == pytest.approx(np.median(row["this_commit"]) / np.median(row["reference"]))
+    assert f"| random | 8 | {np.median(data['rows'][0]['reference']):,.0f} |" in (tmp_path / "README.md").read_text()
+    worktrees = subprocess.run(["git", "-C", root, "worktree", "list"], capture_output=True, text=True).stdout
+    assert "reference" not in worktrees
+    bad = subprocess.run([sys.executable, "scripts/speed_against.py", "--rounds", "0"], cwd=root,
+                         capture_output=True, text=True)
+    assert bad.returncode != 0 and "--rounds 0: at least 1" in bad.stderr

@@ -42,6 +42,9 @@ ZERO, HALF, ONE, TWO = f64(0.0), f64(0.5), f64(1.0), f64(2.0)
 TINY_ = f64(TINY)
 MAX_VERTICES = 8                    # the blade polygon's vertices a kernel holds (the default blade has 5)
 Outline = wp.types.matrix(shape=(MAX_VERTICES, 2), dtype=f64)              # CPFLOAT_MIN
+# The Minkowski difference's points, (segment end i, blade vertex j) at MAX_VERTICES i + j: a stack array the
+# collision's loops index (indexing the Outline matrix at a run-time row stores it to the stack at every read)
+Difference = wp.fixedarray(dtype=wp.vec2d, shape=(2 * MAX_VERTICES,))
 ANCHOR_0, ANCHOR_1 = (wp.constant(wp.vec2d(*anchor)) for anchor in HAND_ANCHORS)    # the springs' hand anchors
 
 
@@ -254,11 +257,12 @@ def segment_end(e0: wp.vec2d, e1: wp.vec2d, i: int) -> wp.vec2d:
 @wp.func
 def outside_an_edge(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, gap: f64) -> bool:
     """Whether both segment ends lie further than ``gap`` outside one of the blade's edges."""
-    for j in range(count):
-        v, n = row(vw, j), row(nw, j)
-        plane = n[0] * v[0] + n[1] * v[1]
-        if n[0] * e0[0] + n[1] * e0[1] - plane > gap and n[0] * e1[0] + n[1] * e1[1] - plane > gap:
-            return True
+    for j in range(wp.static(MAX_VERTICES)):            # constant rows: no store of the matrices
+        if j < count:
+            v, n = row(vw, j), row(nw, j)
+            plane = n[0] * v[0] + n[1] * v[1]
+            if n[0] * e0[0] + n[1] * e0[1] - plane > gap and n[0] * e1[0] + n[1] * e1[1] - plane > gap:
+                return True
     return False
 
 
@@ -277,10 +281,14 @@ def adj_separated(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec
 
 @wp.func
 def candidate(k: int, count: int) -> wp.vec4i:
-    """Candidate edge ``k`` of the difference: (segment end, blade vertex) at its start and its end."""
-    if k < 2 * count:
-        return wp.vec4i(k // count, k % count, k // count, (k % count + 1) % count)
-    return wp.vec4i(0, k - 2 * count, 1, k - 2 * count)
+    """Candidate edge ``k`` of the difference: (segment end, blade vertex) at its start and its end: the
+    blade's edges from end 0 (``k < count``), then from end 1, then the segment from each vertex. Selects,
+    not branches or division, so that the vector stays in registers."""
+    pair = k < 2 * count
+    first = k < count
+    j = wp.where(first, k, wp.where(pair, k - count, k - 2 * count))
+    i = wp.where(pair and not first, 1, 0)
+    return wp.vec4i(i, j, wp.where(pair, i, 1), wp.where(pair, wp.where(j + 1 < count, j + 1, 0), j))
 
 
 @wp.func
@@ -291,17 +299,24 @@ def minkowski(vw: Outline, e0: wp.vec2d, e1: wp.vec2d, i: int, j: int) -> wp.vec
 
 
 @wp.func
-def hull_side(vw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, ax: f64, ay: f64, bx: f64, by: f64) -> int:
+def point(points: Difference, i: int, j: int) -> wp.vec2d:
+    return points[MAX_VERTICES * i + j]
+
+
+@wp.func
+def hull_side(points: Difference, count: int, ax: f64, ay: f64, bx: f64, by: f64) -> int:
     """1 if every point of the difference lies left of ``a -> b``, -1 if right, 0 otherwise."""
     ex, ey = bx - ax, by - ay
     left = int(1)
     right = int(1)
     for i in range(2):
-        e = segment_end(e0, e1, i)
         for j in range(count):
-            side = ex * ((vw[j, 1] - e[1]) - ay) - ey * ((vw[j, 0] - e[0]) - ax)
+            q = point(points, i, j)
+            side = ex * (q[1] - ay) - ey * (q[0] - ax)
             left = left & int(side >= ZERO)
             right = right & int(side <= ZERO)
+            if left == 0 and right == 0:
+                return 0
     if left == 1:
         return 1
     if right == 1:
@@ -310,13 +325,13 @@ def hull_side(vw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d, ax: f64, ay: 
 
 
 @wp.func
-def cores_overlap(vw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2d) -> bool:
+def cores_overlap(points: Difference, count: int) -> bool:
     """Whether the origin lies strictly inside the difference's hull."""
     for k in range(3 * count):
         c = candidate(k, count)
-        a = minkowski(vw, e0, e1, c[0], c[1])
-        b = minkowski(vw, e0, e1, c[2], c[3])
-        left = hull_side(vw, count, e0, e1, a[0], a[1], b[0], b[1])
+        a = point(points, c[0], c[1])
+        b = point(points, c[2], c[3])
+        left = hull_side(points, count, a[0], a[1], b[0], b[1])
         origin = (b[0] - a[0]) * -a[1] - (b[1] - a[1]) * -a[0]
         if (left == 1 and not origin > ZERO) or (left == -1 and not origin < ZERO):
             return False
@@ -342,20 +357,24 @@ def nearest_edge(vw: Outline, nw: Outline, count: int, e0: wp.vec2d, e1: wp.vec2
     its end, in the order its normal needs: the nearest of the candidates (GJK's) while the cores are apart,
     the nearest edge of the hull (EPA's) once they overlap. A choice, so it has no gradient
     (:func:`adj_nearest_edge`)."""
+    points = wp.zeros(shape=wp.static(2 * MAX_VERTICES), dtype=wp.vec2d)
+    for j in range(wp.static(MAX_VERTICES)):            # constant rows: no store of the matrix
+        points[j] = minkowski(vw, e0, e1, 0, j)
+        points[MAX_VERTICES + j] = minkowski(vw, e0, e1, 1, j)
     # the cores overlap only where the bar's core meets the blade: both ends outside one of its edges (by a
     # margin far above rounding) rule that out without the hull's test
     inside = False
     if not outside_an_edge(vw, nw, count, e0, e1, f64(1e-12)):
-        inside = cores_overlap(vw, count, e0, e1)
+        inside = cores_overlap(points, count)
     best_d, best_px, best_py, e_dx, e_dy, best_left = f64(math.inf), f64(0.0), f64(0.0), f64(0.0), f64(0.0), int(0)
     best = wp.vec4i(0, 0, 0, 0)
     for k in range(3 * count):
         c = candidate(k, count)
-        a = minkowski(vw, e0, e1, c[0], c[1])
-        b = minkowski(vw, e0, e1, c[2], c[3])
+        a = point(points, c[0], c[1])
+        b = point(points, c[2], c[3])
         left = int(0)
         if inside:
-            left = hull_side(vw, count, e0, e1, a[0], a[1], b[0], b[1])
+            left = hull_side(points, count, a[0], a[1], b[0], b[1])
         if not (inside and left == 0):                   # inside the hull: not where EPA ends
             t = closest_t(a[0], a[1], b[0], b[1])
             q = lerp_t(a[0], a[1], b[0], b[1], t)
