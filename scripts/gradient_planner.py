@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 import time
@@ -39,7 +38,7 @@ from softenv.baselines.evaluate import SCENES, episode_seeds, evaluate, normaliz
 from softenv.baselines.gradient_planner import STEP_SIZES, GradientPlanner, planner_warm_start, tune_lr  # noqa: E402
 from softenv.baselines.planner import TrajectoryOracle  # noqa: E402
 from softenv.baselines.policies import PlanningOracle, make_baseline  # noqa: E402
-from softenv.bench import single_thread_environment, threads_pinned  # noqa: E402
+from softenv.bench import rerun_single_threaded  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 from softenv.stats import bootstrap_ci  # noqa: E402
@@ -50,8 +49,7 @@ def summary(values: np.ndarray) -> dict[str, float]:
 
 
 def main() -> None:
-    if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    rerun_single_threaded()
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)

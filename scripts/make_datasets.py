@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -22,15 +21,14 @@ import numpy as np
 
 from softenv._artifact import write_text
 from softenv.baselines.minari_datasets import DATASET_SCENES, KINDS, load_or_make, size_bytes, softenv_metadata
-from softenv.bench import single_thread_environment, threads_pinned
+from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
 
 CLINICAL = ("peak_tongue_force_N", "peak_incisor_force_N", "hand_path_m", "glottic_view_pct")
 
 
 def main() -> None:
-    if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    rerun_single_threaded()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", choices=list(DATASET_SCENES), default=list(DATASET_SCENES))
     parser.add_argument("--kinds", nargs="+", choices=list(KINDS), default=list(KINDS))

@@ -16,7 +16,6 @@ file in ``--out`` (``softenv leaderboard aggregate --plot``'s figure) into ``--f
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -28,7 +27,7 @@ from softenv.baselines.anchors import scene_config
 from softenv.baselines.benchmark import agent_budget, full_plan, quick_plan, scene_baselines
 from softenv.baselines.evaluate import SCENES
 from softenv.baselines.policies import make_baseline
-from softenv.bench import single_thread_environment, threads_pinned
+from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
 from softenv.envs.world import World
 from softenv.evaluation import Evaluation, evaluate_policy
@@ -51,8 +50,7 @@ def agent_result(algo: str, scene: str, paths: list[str]) -> Evaluation:
 
 
 def main() -> None:
-    if not threads_pinned():              # one BLAS thread, as softenv compare and the anchors
-        os.execve(sys.executable, [sys.executable, *sys.argv], single_thread_environment())
+    rerun_single_threaded()               # one BLAS thread, as softenv compare and the anchors
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="agents as softenv compare --quick trains them")
     parser.add_argument("--scenes", nargs="+", choices=list(SCENES), default=list(SCENES))

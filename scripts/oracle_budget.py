@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 import time
@@ -37,7 +36,7 @@ from softenv.baselines.anchors import load_anchors, oracle_of, scene_config  # n
 from softenv.baselines.evaluate import SCENES, device_kind, episode_seeds  # noqa: E402
 from softenv.baselines.planner import TrajectoryOracle  # noqa: E402
 from softenv.baselines.policies import make_baseline  # noqa: E402
-from softenv.bench import single_thread_environment, threads_pinned  # noqa: E402
+from softenv.bench import rerun_single_threaded  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 
@@ -52,8 +51,7 @@ def scores(errors: np.ndarray, zero: np.ndarray, oracle: np.ndarray) -> np.ndarr
 
 
 def main() -> None:
-    if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    rerun_single_threaded()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--scenes", nargs="+", choices=LARYNGOSCOPE, default=LARYNGOSCOPE)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 import time
@@ -48,7 +47,7 @@ from softenv.baselines.anchors import scene_config  # noqa: E402
 from softenv.baselines.evaluate import scene_kwargs  # noqa: E402
 from softenv.baselines.gradient_planner import EDGE, TRAIN, planner_warm_start  # noqa: E402
 from softenv.baselines.planner import warm_start_actions  # noqa: E402
-from softenv.bench import single_thread_environment, threads_pinned  # noqa: E402
+from softenv.bench import rerun_single_threaded  # noqa: E402
 from softenv.bench.timing import code_revision  # noqa: E402
 from softenv.envs.world import World  # noqa: E402
 from softenv.smoothing import SmoothedGradient, smoothed_gradient  # noqa: E402
@@ -138,8 +137,7 @@ def downhill(episode: Callable[[torch.Tensor], torch.Tensor], z: torch.Tensor, g
 
 
 def main() -> None:
-    if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    rerun_single_threaded()
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 import time
@@ -43,7 +42,7 @@ import yaml
 from softenv._artifact import write_text
 from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
-from softenv.bench import single_thread_environment, threads_pinned
+from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
 from softenv.stats import bootstrap_ci
 
@@ -93,8 +92,7 @@ def verdict(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main() -> None:
-    if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment()})
+    rerun_single_threaded()
     torch.set_num_threads(1)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--algo", choices=list(ALGOS), required=True)

@@ -58,6 +58,14 @@ def threads_pinned() -> bool:
     return all(os.environ.get(v) == "1" for v in THREAD_VARS)
 
 
+def rerun_single_threaded(**extra: str) -> None:
+    """Replace this script's process by the same command with one BLAS/OpenMP thread (and ``extra``
+    variables), unless it already runs so: BLAS reads its thread count when numpy loads, which a script
+    has done by the time it parses its arguments."""
+    if not threads_pinned():
+        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment(), **extra})
+
+
 def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str = "softenv bench",
         echo: Callable[[str], None] = print, device: str = "cpu") -> list[Row]:
     """Run the selected sections (all but the GPU ones by default), print the table, write the reports
