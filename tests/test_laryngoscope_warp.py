@@ -5,6 +5,8 @@ gradients, bridged to torch autograd, match central differences on smooth stretc
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pymunk
 import pytest
@@ -16,7 +18,7 @@ from softenv.devices.laryngoscope.warp_arrays import LaryngoscopeWarp
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.devices.laryngoscope.single import Laryngoscope
-from softenv.devices.laryngoscope.state import IncisorContact
+from softenv.devices.laryngoscope.state import IncisorContact, polygon_planes
 from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
 from softenv.envs.world import World
@@ -96,21 +98,37 @@ def _collide_poses(poses: wp.array(dtype=wp.vec3d), p: K.Params, local: wp.array
     exists[i, 1] = hit.ex[1]
 
 
-def test_the_blade_meets_the_incisors_where_chipmunk_finds_it_bit_for_bit():
+def _outline(p: LaryngoscopeParams, vertices: int) -> list[tuple[float, float]]:
+    """The blade's own outline (5 vertices), or a convex polygon of ``vertices`` corners on the ellipse
+    through its length and flange height, about its middle (other counts the kernel holds, up to 8)."""
+    if vertices == 5:
+        return p.outline
+    (x0, y0), (x1, y1) = p.body_point(-p.blade_length, 0.0), p.body_point(0.0, p.flange_height)
+    angles = np.linspace(0.0, 2 * np.pi, vertices, endpoint=False) + 0.3
+    return [((x0 + x1) / 2 + (x1 - x0) / 2 * np.cos(t), (y0 + y1) / 2 + (y1 - y0) / 2 * np.sin(t)) for t in angles]
+
+
+@pytest.mark.parametrize("vertices", [5, 3, 8])
+def test_the_blade_meets_the_incisors_where_chipmunk_finds_it_bit_for_bit(vertices):
     """4,000 blade poses around the incisors (3 cm back and forth, 2 mm below to 30 mm into them,
     +-0.6 rad): the contact normal, the points on both surfaces and how many there are equal Chipmunk's own
     collision of the two shapes, where the cores stay apart (GJK's closest points) and where the blade sinks
-    deeper than the incisors' 4 mm radius, so that their cores overlap (EPA's nearest edge of the hull)."""
+    deeper than the incisors' 4 mm radius, so that their cores overlap (EPA's nearest edge of the hull); for
+    the blade's outline and for polygons of 3 and 8 corners (the candidate edges depend on the count)."""
     p = LaryngoscopeParams.from_config(haptic_config(None))
     space = pymunk.Space()
     blade = pymunk.Body(p.mass, p.moment)
-    poly, segment = pymunk.Poly(blade, p.outline), pymunk.Segment(space.static_body, *p.incisor_segment, INCISOR_RADIUS)
+    poly = pymunk.Poly(blade, _outline(p, vertices))
+    segment = pymunk.Segment(space.static_body, *p.incisor_segment, INCISOR_RADIUS)
     space.add(blade, poly, segment)
     rng = np.random.default_rng(0)
     n = 4000
     poses = np.stack([p.body_start[0] + rng.uniform(-0.03, 0.03, n), p.body_start[1] + rng.uniform(-0.002, 0.03, n),
                       rng.uniform(-0.6, 0.6, n)], axis=1)
     contact = IncisorContact.of(p, 1e-3)
+    local, local_normals = polygon_planes([tuple(v) for v in poly.get_vertices()])    # in Chipmunk's order
+    assert len(local) == vertices
+    contact = dataclasses.replace(contact, local=local, local_normals=local_normals)
     params = K.Params()
     params.end0, params.end1 = wp.vec2d(*contact.ends[0]), wp.vec2d(*contact.ends[1])
     params.seg_normal, params.radius, params.vertices = wp.vec2d(*contact.seg_normal), contact.radius, len(contact.local)
