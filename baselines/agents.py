@@ -1,6 +1,11 @@
 """SB3 agents on SoftSphere: hyper-parameters from rl-zoo-style YAML, training on the batched twin
 with CSV/TensorBoard logs and evaluation on the test targets; a run directory holds a finished run or
-nothing; saved agents carry their scene, observation layout and model digest, checked on load."""
+nothing; saved agents carry their scene, observation layout and model digest, checked on load.
+
+A finished run is reused only when it was trained on the same simulator: its ``agent.json`` records
+the libraries that train it and a digest of what its envs return to seeded random actions
+(:func:`dynamics_digest`), so a run directory can be kept across sessions and code changes, and an
+agent is trained again exactly when a change reaches what it learns from."""
 
 from __future__ import annotations
 
@@ -9,6 +14,7 @@ import hashlib
 import json
 import os
 import shutil
+from importlib.metadata import version
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -29,7 +35,9 @@ ALGOS: dict[str, tuple[str, str]] = {
     "td3": ("TD3", "td3.yml"),
     "sac-her": ("SAC", "her.yml"),
 }
-AGENT_FORMAT_VERSION = 2        # 2: the model's digest, no resumes
+AGENT_FORMAT_VERSION = 3        # 3: the dynamics' digest and the libraries' versions; 2: the model's digest
+TRAINING_LIBRARIES = ("stable-baselines3", "torch", "gymnasium", "numpy")
+PROBE_ENVS = 2
 
 
 def _literal_dict(text: str) -> dict[str, Any]:
@@ -66,10 +74,16 @@ def agent_env_kwargs(algo: str, scene: str, split: str = "test") -> tuple[str, d
     return env_id, kwargs
 
 
-def _layout(algo: str, scene: str) -> dict[str, Any]:
+def _scene_sections(algo: str, scene: str) -> dict[str, Any]:
+    """The scene sections ``make_config`` takes for ``algo`` on ``scene`` (its env kwargs but the observation mode)."""
     kwargs = agent_env_kwargs(algo, scene)[1]
-    obs_mode = kwargs.pop("obs_mode")
-    config = make_config(**kwargs)
+    kwargs.pop("obs_mode")
+    return kwargs
+
+
+def _layout(algo: str, scene: str) -> dict[str, Any]:
+    obs_mode = agent_env_kwargs(algo, scene)[1]["obs_mode"]
+    config = make_config(**_scene_sections(algo, scene))
     return {"scene": scene, "obs_mode": obs_mode,
             "scene_key": config_key(config, ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task"))}
 
@@ -82,6 +96,31 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
     env_id, kwargs = agent_env_kwargs(algo, scene, split)
     # the adapter's default infos: is_success, all SB3 reads (the other terms would cost a dict entry each)
     return VecMonitor(SoftSphereSB3VecEnv(n_envs, env_id, **kwargs))
+
+
+def dynamics_digest(algo: str, scene: str) -> str:
+    """SHA-256 of what ``algo``'s training and evaluation envs on ``scene`` return (observations, rewards,
+    episode ends, bit for bit) to seeded random actions over one episode and into the next (the
+    autoreset): it changes with any change to the simulator, the scene or the targets that such a
+    rollout reaches, and not with refactors that leave every step's floats alone. A change no random
+    step reaches (a branch only a policy's deliberate action takes) must bump :data:`AGENT_FORMAT_VERSION`."""
+    digest = hashlib.sha256()
+    rng = np.random.default_rng(0)
+    horizon = make_config(**_scene_sections(algo, scene))["task"]["horizon"]
+    for split in ("train", "test"):
+        env = make_training_env(algo, scene, PROBE_ENVS, split)
+        try:
+            env.seed(0)
+            obs = env.reset()
+            for _ in range(horizon + 10):
+                for part in (obs[k] for k in sorted(obs)) if isinstance(obs, dict) else (obs,):
+                    digest.update(np.ascontiguousarray(part).tobytes())
+                obs, reward, done, _ = env.step(rng.uniform(-1.0, 1.0, (PROBE_ENVS, 4)).astype(np.float32))
+                digest.update(np.ascontiguousarray(reward).tobytes() + np.ascontiguousarray(done).tobytes())
+        finally:
+            env.close()
+    return digest.hexdigest()
+
 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
@@ -114,7 +153,8 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     params.pop("env_kwargs", None)               # for the env (make_training_env), not the algorithm
     out = Path(out_dir)
     wanted = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-              "overrides": dict(overrides or {}), **_layout(algo, scene)}
+              "overrides": dict(overrides or {}), **_layout(algo, scene),
+              "libraries": {name: version(name) for name in TRAINING_LIBRARIES}, "dynamics": dynamics_digest(algo, scene)}
     if reuse and finished_run(out, wanted) is None:
         return out / "model.zip"
     partial = out.with_name(out.name + ".partial")

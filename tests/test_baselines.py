@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from softenv.baselines.agents import ALGOS, _literal_dict, hyperparams, load_agent, train_agent
+from softenv.baselines.agents import (AGENT_FORMAT_VERSION, ALGOS, _literal_dict, dynamics_digest, hyperparams, load_agent,
+                                      train_agent)
 from softenv.baselines.benchmark import (ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds,
                                         run, seed_label)
 from softenv.baselines.curves import learning_curve
@@ -100,12 +101,35 @@ def test_agent_file_is_checked_against_the_scene(tmp_path):
     (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="format_version=99"):
         load_agent(path, "SoftSphere-v0")
-    meta["format_version"] = 2
+    meta["format_version"] = AGENT_FORMAT_VERSION
     (tmp_path / "ppo" / "agent.json").write_text(json.dumps(meta))
     with path.open("ab") as fh:                   # a model that is not the one trained: refused
         fh.write(b"\0")
     with pytest.raises(ValueError, match="does not match model_sha256"):
         load_agent(path, "SoftSphere-v0")
+
+
+def test_a_finished_run_is_reused_only_on_the_simulator_it_was_trained_on(tmp_path, monkeypatch):
+    """A run directory kept across code changes: the agent is trained again when its envs would return
+    other floats (its recorded dynamics digest differs), or when another library version would train it."""
+    path = train_agent("ppo", "SoftSphere-v0", 0, tmp_path / "ppo", timesteps=512, progress=False)
+    meta_path = tmp_path / "ppo" / "agent.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["dynamics"] == dynamics_digest("ppo", "SoftSphere-v0") and meta["libraries"]["stable-baselines3"]
+    stamp = path.stat().st_mtime_ns
+    assert train_agent("ppo", "SoftSphere-v0", 0, tmp_path / "ppo", timesteps=512, progress=False) == path
+    assert path.stat().st_mtime_ns == stamp                      # the same simulator: reused
+    for key, other in (("dynamics", "0" * 64), ("libraries", {**meta["libraries"], "torch": "0.0"})):
+        meta_path.write_text(json.dumps({**meta, key: other}))
+        train_agent("ppo", "SoftSphere-v0", 0, tmp_path / "ppo", timesteps=512, progress=False)
+        assert json.loads(meta_path.read_text())[key] == meta[key]    # trained again, on this one
+    # the digest follows the simulator's code, not only its settings: a reward computed otherwise (by a part in a
+    # million: the adapter's float32 rewards, what SB3 learns from, see it)
+    import softenv.envs.vector as vector
+
+    terms = vector.reward_terms
+    monkeypatch.setattr(vector, "reward_terms", lambda *args: (terms(*args)[0] * (1 + 1e-6), *terms(*args)[1:]))
+    assert dynamics_digest("ppo", "SoftSphere-v0") != meta["dynamics"]
 
 
 def _weights(path) -> list[np.ndarray]:
