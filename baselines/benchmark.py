@@ -394,9 +394,9 @@ def agent_budget(plan: Plan, algo: str, scene: str) -> int:
         return given
     if algo in OFFLINE_AGENTS:
         return OFFLINE_STEPS[offline_parts(algo)[0]]
-    if algo == SHAC:
-        return _shac_budget()
-    return _torch_ppo_budget() if algo == TORCH_PPO else int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
+    if algo in (SHAC, TORCH_PPO):
+        return _torch_agent_budget(algo)
+    return int(hyperparams(algo, scene_kwargs(scene)[0])["n_timesteps"])
 
 
 def _agent_kind(plan: Plan, algo: str, scene: str) -> str:
@@ -407,16 +407,12 @@ def _agent_kind(plan: Plan, algo: str, scene: str) -> str:
     return f"agent ({steps:,} steps{how})"
 
 
-def _torch_ppo_budget() -> int:
+def _torch_agent_budget(algo: str) -> int:
+    """A torch agent's own default budget (its arguments' ``total_timesteps``)."""
     from .ppo_torch import Args                             # torch: the rl extra
-
-    return Args.total_timesteps
-
-
-def _shac_budget() -> int:
     from .shac import ShacArgs                              # torch: the rl extra
 
-    return ShacArgs.total_timesteps
+    return (ShacArgs if algo == SHAC else Args).total_timesteps
 
 
 def _listed(value: Any) -> str:

@@ -121,8 +121,7 @@ def main() -> None:
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(
         study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes}",
-        storage=f"sqlite:///{(args.runs / 'tuning.db').resolve()}", direction="minimize", load_if_exists=True,
-        sampler=optuna.samplers.TPESampler(seed=0, n_startup_trials=5))    # reseeded before each trial (below)
+        storage=f"sqlite:///{(args.runs / 'tuning.db').resolve()}", direction="minimize", load_if_exists=True)
     for cut in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         study.tell(cut.number, state=optuna.trial.TrialState.FAIL)        # a run that was stopped
     chosen = {"gamma": yaml_params["gamma"], "learning_rate": yaml_params["learning_rate"]}
