@@ -12,7 +12,9 @@ sampler (seeded by the number of finished trials before each proposal) proposes 
 scale), its first 5 trials at random. The study is an SQLite file in ``--runs``, so a
 stopped search resumes: ``--trials`` is the total wanted, finished trials are kept, one cut short is
 marked failed and run again as a new trial with the same proposal, so the resumed search is the unstopped
-one.
+one. The study is named after the simulator it scores on (the agents' dynamics digest and training
+libraries, as a trained run records them), so a search resumed after a change to what the agents learn
+from starts afresh rather than ranking trials scored on two simulators.
 
 A search on few seeds picks its best partly by luck. ``--confirm K`` trains the K best trials and the
 YAML's values again on ``--confirm-seeds`` (seeds the search did not use) and decides by the seeds: the
@@ -27,10 +29,12 @@ with the best trial's values, or with the confirmation's verdict, to adopt into
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import shlex
 import sys
 import time
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +44,7 @@ import torch
 import yaml
 
 from softenv._artifact import write_text
-from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent
+from softenv.baselines.agents import ALGOS, TRAINING_LIBRARIES, dynamics_digest, hyperparams, load_agent, train_agent
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
@@ -119,8 +123,11 @@ def main() -> None:
     command = "python scripts/tune_agents.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     args.runs.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    libraries = json.dumps({name: version(name) for name in TRAINING_LIBRARIES})
+    simulator = hashlib.sha256((dynamics_digest(args.algo, args.scene) + libraries).encode()).hexdigest()[:16]
     study = optuna.create_study(
-        study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes}",
+        study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes} "
+                   f"simulator {simulator}",
         storage=f"sqlite:///{(args.runs / 'tuning.db').resolve()}", direction="minimize", load_if_exists=True)
     for cut in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.RUNNING,)):
         study.tell(cut.number, state=optuna.trial.TrialState.FAIL)        # a run that was stopped
@@ -177,7 +184,8 @@ def main() -> None:
                f"\nVerdict: adopt trial {choice['number']} (gamma {choice['gamma']}, learning_rate "
                f"{choice['learning_rate']:.3g}): its interval lies wholly below the YAML's; `{stem}.yml` carries it.\n"))
     write_text(args.out / f"{stem}.md", header + "\n" + "\n".join(rows) + "\n" + best_line + confirmation)
-    record: dict[str, Any] = {"command": command, "commit": code_revision(), "timesteps": budget, "seeds": args.seeds,
+    record: dict[str, Any] = {"command": command, "commit": code_revision(), "study": study.study_name,
+                              "timesteps": budget, "seeds": args.seeds,
                               "episodes": args.episodes, "best": {"number": best.number, **best.params,
                                                                    "value": best.value},
                               "trials": [{"number": t.number, **t.params, "value": t.value, **t.user_attrs}

@@ -5,6 +5,9 @@ is the best trial's."""
 from __future__ import annotations
 
 import json
+import re
+import shutil
+import sqlite3
 import subprocess
 import sys
 from pathlib import Path
@@ -30,6 +33,16 @@ def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     assert [line.split(":")[0] for line in again.stdout.splitlines() if line.startswith("trial ")] == ["trial 2"]
     record = json.loads((tmp_path / "out" / "SoftSphere-v0__ppo.json").read_text())
     assert len(record["trials"]) == 3
+    # the study is the simulator's: trials scored on another simulator (its study renamed, as a change to the
+    # dynamics or the libraries would name it) are not resumed; the search starts afresh beside them
+    assert re.fullmatch(r".* simulator [0-9a-f]{16}", record["study"])
+    other = tmp_path / "other"
+    shutil.copytree(tmp_path / "runs", other / "runs")
+    with sqlite3.connect(other / "runs" / "tuning.db") as db:
+        db.execute("UPDATE studies SET study_name = ?", (record["study"][:-16] + "0" * 16,))
+    fresh = _tune(other, 2)
+    assert fresh.returncode == 0, fresh.stderr[-2000:]
+    assert [line.split(":")[0] for line in fresh.stdout.splitlines() if line.startswith("trial ")] == ["trial 0", "trial 1"]
     whole = _tune(tmp_path / "whole", 3)           # the same search, never stopped: the same proposals and scores
     assert whole.returncode == 0, whole.stderr[-2000:]
     unstopped = json.loads((tmp_path / "whole" / "out" / "SoftSphere-v0__ppo.json").read_text())["trials"]
