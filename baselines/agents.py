@@ -82,8 +82,9 @@ def _scene_sections(algo: str, scene: str) -> dict[str, Any]:
 
 
 def _layout(algo: str, scene: str) -> dict[str, Any]:
-    obs_mode = agent_env_kwargs(algo, scene)[1]["obs_mode"]
-    config = make_config(**_scene_sections(algo, scene))
+    sections = agent_env_kwargs(algo, scene)[1]
+    obs_mode = sections.pop("obs_mode")
+    config = make_config(**sections)
     return {"scene": scene, "obs_mode": obs_mode,
             "scene_key": config_key(config, ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task"))}
 
@@ -122,6 +123,12 @@ def dynamics_digest(algo: str, scene: str) -> str:
     return digest.hexdigest()
 
 
+def training_fingerprint(algo: str, scene: str) -> dict[str, Any]:
+    """What a trained agent depends on beyond its settings: the training libraries' versions and
+    :func:`dynamics_digest`. A finished run is reused, and a tuning study resumed, only when it matches."""
+    return {"libraries": {name: version(name) for name in TRAINING_LIBRARIES},
+            "dynamics": dynamics_digest(algo, scene)}
+
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
                 progress: bool = True, eval_episodes: int = 20, reuse: bool = True,
@@ -154,7 +161,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     out = Path(out_dir)
     wanted = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
               "overrides": dict(overrides or {}), **_layout(algo, scene),
-              "libraries": {name: version(name) for name in TRAINING_LIBRARIES}, "dynamics": dynamics_digest(algo, scene)}
+              **training_fingerprint(algo, scene)}
     if reuse and finished_run(out, wanted) is None:
         return out / "model.zip"
     partial = out.with_name(out.name + ".partial")

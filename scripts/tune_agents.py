@@ -34,7 +34,6 @@ import json
 import shlex
 import sys
 import time
-from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +43,7 @@ import torch
 import yaml
 
 from softenv._artifact import write_text
-from softenv.baselines.agents import ALGOS, TRAINING_LIBRARIES, dynamics_digest, hyperparams, load_agent, train_agent
+from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent, training_fingerprint
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
@@ -123,8 +122,8 @@ def main() -> None:
     command = "python scripts/tune_agents.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     args.runs.mkdir(parents=True, exist_ok=True)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    libraries = json.dumps({name: version(name) for name in TRAINING_LIBRARIES})
-    simulator = hashlib.sha256((dynamics_digest(args.algo, args.scene) + libraries).encode()).hexdigest()[:16]
+    fingerprint = training_fingerprint(args.algo, args.scene)
+    simulator = hashlib.sha256((fingerprint["dynamics"] + json.dumps(fingerprint["libraries"])).encode()).hexdigest()[:16]
     study = optuna.create_study(
         study_name=f"{args.scene} {args.algo} {budget} steps seeds {args.seeds} episodes {args.episodes} "
                    f"simulator {simulator}",
