@@ -35,7 +35,7 @@ from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import ORACLE, anchor_job
-from .curves import Curve, convergence, convergence_report, learning_curve
+from .curves import RULE, Curve, convergence, convergence_report, learning_curve
 from .minari_datasets import KINDS, dataset_id, load_or_make
 from .evaluate import CLINICAL, GRADED_SCENES, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .policies import BASELINES, applies, make_baseline
@@ -583,9 +583,8 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           *(["Agents by training seed (normalized score, mean [95 % bootstrap interval] over each seed's test "
              "episodes; the table above pools them):\n", format_seeds(summaries), ""]
             if any("seed_scores" in s for s in summaries) else []),
-          *(["Learning curves against the convergence rule (`baselines/curves.py`): converged when the seeds' mean "
-             "test-target return rose over the last 20 % of the budget by less than the half-width of the 95 % "
-             "interval over seeds of the final return (a bootstrap over the seeds). Agents compared at equal "
+          *([f"Learning curves against the convergence rule (`baselines/curves.py`), on test-target returns: {RULE}. "
+             "A seed is still rising when its own further gain is above 5 % of its own gain so far. Agents compared at equal "
              "environment steps, not equal wall time: each curve's last evaluation at or before the smallest "
              "budget among the agents on the scene (mean [95 % interval over seeds]); the job wall time (training "
              "and test episodes, single-threaded) is beside it.\n", curve_table, ""] if curve_rows else []),

@@ -1,10 +1,13 @@
 """Learning curves: read from a training run, judged by the benchmark's stated convergence rule, and
 compared across agents at equal environment steps.
 
-The rule (issue 55): an agent's training on a scene *converged* when its seeds' mean test return rose over
-the last fifth of its budget by less than the half-width of the 95 % interval over seeds of its final
-return (a bootstrap over the seeds' last evaluations). A curve still rising by more than the seeds
-disagree is not converged, and its budget is too small; with one seed the rule cannot be applied.
+The rule (issue 55), :data:`RULE` in words: each seed's trend is the least-squares line through its
+evaluations over the last half of the budget; from it, the gain a further fifth of the budget would add,
+and the gain training made so far (the line at the end minus the first evaluation). An agent's training
+on a scene *converged* when the upper end of the 95 % interval over seeds of the further gain is below
+5 % of the seeds' mean gain so far. Each seed is paired with itself, so seeds that level off far apart
+(one stuck, one good) do not widen the tolerance; the trend reads five or more evaluations, not two; and
+the verdict needs the plateau shown, not merely not refuted. With one seed there is no interval.
 
 Equal steps: off-policy agents (SAC, TD3) train on 27-40 times fewer env steps than PPO, so a table of
 their final scores compares budgets as much as methods. Each curve read at the smallest budget of the
@@ -22,7 +25,12 @@ from softenv.stats import bootstrap_ci
 
 Curve = tuple[np.ndarray, np.ndarray]        # env steps, mean test-target return at each evaluation
 
-TAIL = 0.2                   # the last fifth of the budget: the stretch the rule looks at
+TREND = 0.5                  # the last half of the budget: the stretch whose trend the rule reads
+AHEAD = 0.2                  # a further fifth of the budget: the gain the rule projects
+TOLERANCE = 0.05             # of the gain so far: the further gain a plateau may still show
+RULE = ("converged when, by each seed's least-squares trend over the last half of the budget, a further "
+        "20 % of the budget would add less than 5 % of what training gained so far (the trend's end minus "
+        "the first evaluation), at the upper end of the 95 % interval over seeds")
 
 
 def learning_curve(run_dir: Path) -> Curve | None:
@@ -43,22 +51,34 @@ def value_at(curve: Curve, steps: float) -> tuple[float, int]:
     return float(values[i]), int(at[i])
 
 
-def convergence(runs: list[Curve], tail: float = TAIL) -> dict[str, Any]:
+def _trend(curve: Curve, end: float) -> tuple[float, float]:
+    """One seed's (further gain, gain so far) by its line over the last :data:`TREND` of ``end`` env steps."""
+    steps, values = curve
+    window = (steps >= (1 - TREND) * end) & (steps <= end)
+    if window.sum() < 2:
+        return float("nan"), float("nan")
+    slope, intercept = np.polyfit(steps[window] / end, values[window], 1)
+    return float(slope * AHEAD), float(slope + intercept - values[0])
+
+
+def convergence(runs: list[Curve]) -> dict[str, Any]:
     """The rule applied to one agent's curves on one scene (one curve a training seed): the mean final
-    return with its interval over seeds, the mean rise over the last ``tail`` of the budget, and whether
-    the rise is below the interval's half-width (``converged`` is None with fewer than 2 seeds)."""
+    return with its interval over seeds, the mean further gain with its interval, the tolerance, how many
+    seeds are still rising by their own gain, and the verdict (``converged`` is None with fewer than 2
+    seeds or fewer than 2 evaluations in a seed's last half)."""
     if not runs:
         raise ValueError("runs=[]: give at least one learning curve")
-    if not 0 < tail < 1:
-        raise ValueError(f"tail={tail}: give a share of the budget in (0, 1)")
     end = min(float(steps[-1]) for steps, _ in runs)
     finals = np.array([value_at(c, end)[0] for c in runs])
-    starts = np.array([value_at(c, (1 - tail) * end)[0] for c in runs])
+    ahead, gained = np.array([_trend(c, end) for c in runs]).T
     mean, low, high = bootstrap_ci(finals)
-    rise = float(np.mean(finals - starts))
-    half = (high - low) / 2
+    judged = len(runs) >= 2 and bool(np.isfinite(ahead).all())
+    ahead_mean, ahead_low, ahead_high = bootstrap_ci(ahead) if judged else (float(np.mean(ahead)), float("nan"), float("nan"))
+    tolerance = TOLERANCE * abs(float(np.mean(gained)))
     return {"seeds": len(runs), "budget": int(end), "final": mean, "final_low": low, "final_high": high,
-            "rise": rise, "half_width": half, "converged": None if len(runs) < 2 else bool(rise < half)}
+            "ahead": ahead_mean, "ahead_low": ahead_low, "ahead_high": ahead_high, "tolerance": tolerance,
+            "still_rising": int(np.sum(ahead > TOLERANCE * np.abs(gained))),
+            "converged": bool(ahead_high < tolerance) if judged else None}
 
 
 def at_equal_steps(curves: dict[str, list[Curve]]) -> tuple[int, dict[str, tuple[float, float, float]]]:
@@ -86,13 +106,15 @@ def convergence_report(curves: dict[tuple[str, str], list[Curve]],
             rows.append({"scene": scene, "agent": agent, **convergence(runs), "equal_steps": steps,
                          "at_equal_steps": dict(zip(("mean", "ci_low", "ci_high"), equal[agent])),
                          "wall_s_per_seed": float(np.mean(seconds)) if seconds else float("nan")})
-    verdict = {True: "yes", False: "no: still rising", None: "- (one seed)"}
-    lines = ["| scene | agent | seeds | budget (env steps) | final return | rise over the last 20 % | interval half-width | "
-             "converged | return at equal steps | job wall per seed (s) |", "|" + "---|" * 10]
+    verdict = {True: "yes", False: "no: still rising", None: "- (one seed, or under 2 evaluations in the last half)"}
+    lines = ["| scene | agent | seeds | budget (env steps) | final return | gain a further 20 % would add | "
+             "tolerance (5 % of the gain so far) | seeds still rising | converged | return at equal steps | "
+             "job wall per seed (s) |", "|" + "---|" * 11]
     for r in rows:
         eq = r["at_equal_steps"]
         lines.append(f"| {r['scene']} | {r['agent']} | {r['seeds']} | {r['budget']:,} | {r['final']:.1f} "
-                     f"[{r['final_low']:.1f}, {r['final_high']:.1f}] | {r['rise']:+.1f} | {r['half_width']:.1f} | "
+                     f"[{r['final_low']:.1f}, {r['final_high']:.1f}] | {r['ahead']:+.1f} [{r['ahead_low']:+.1f}, "
+                     f"{r['ahead_high']:+.1f}] | {r['tolerance']:.1f} | {r['still_rising']} of {r['seeds']} | "
                      f"{verdict[r['converged']]} | {eq['mean']:.1f} [{eq['ci_low']:.1f}, {eq['ci_high']:.1f}] at "
                      f"{r['equal_steps']:,} | {r['wall_s_per_seed']:.0f} |")
     return "\n".join(lines), rows

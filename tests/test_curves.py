@@ -19,27 +19,41 @@ def test_value_at_reads_the_last_evaluation_at_or_before():
 
 
 def test_a_flat_tail_converges_and_a_rising_one_does_not():
-    """Three seeds level at -10, -12, -14 after 5,000 steps: no rise in the last fifth, so converged.
-    Three seeds still climbing 5 a step over seeds within 1 of each other: the rise (10 from 8,000 to
-    10,000 steps) is far above the interval's half-width, so not converged."""
+    """Three seeds level at -10, -12, -14 from 5,000 steps: their lines over the last half are flat, so no
+    further gain, converged. Three seeds still climbing 5 each 1,000 steps: a further 2,000 steps add 10,
+    against a tolerance of 5 % of the 45 gained (-60 to -15), so not converged, every seed still rising."""
     flat = [(STEPS, np.r_[np.linspace(-100, level, 5), [level] * 5]) for level in (-10.0, -12.0, -14.0)]
     c = convergence(flat)
-    assert c["rise"] == 0.0 and c["final"] == pytest.approx(-12.0) and c["converged"] is True
+    assert c["ahead"] == pytest.approx(0.0, abs=1e-9) and c["final"] == pytest.approx(-12.0)
+    assert c["tolerance"] == pytest.approx(0.05 * 88.0) and c["still_rising"] == 0 and c["converged"] is True
     mean, low, high = bootstrap_ci(np.array([-10.0, -12.0, -14.0]))
-    assert (c["final_low"], c["final_high"], c["half_width"]) == (low, high, (high - low) / 2)
+    assert (c["final_low"], c["final_high"]) == (low, high)
 
     rising = [(STEPS, -60 + 5 * np.arange(10) + offset) for offset in (0.0, 0.5, 1.0)]
     r = convergence(rising)
-    assert r["rise"] == pytest.approx(10.0) and r["half_width"] < 1 and r["converged"] is False
+    assert r["ahead"] == pytest.approx(10.0) and r["tolerance"] == pytest.approx(0.05 * 45.0)
+    assert r["still_rising"] == 3 and r["converged"] is False
     assert r["budget"] == 10_000 and r["seeds"] == 3
 
 
-def test_one_seed_has_no_verdict_and_bad_input_is_refused():
+def test_seeds_levelled_far_apart_do_not_loosen_the_rule():
+    """The old rule's flaw: two seeds stuck at -200 and two at -60 give a final interval some 70 wide, which
+    hid a third pair still climbing 4 each 1,000 steps. Paired by seed, their further gains (0, 0, 8, 8)
+    have an upper end of 8, above 5 % of the mean gain so far, so not converged; two seeds still rising."""
+    stuck = [(STEPS, np.r_[np.linspace(-250, level, 5), [level] * 5]) for level in (-200.0, -60.0)]
+    climbing = [(STEPS, -120 + 4 * np.arange(10.0) + offset) for offset in (0.0, 1.0)]
+    r = convergence(stuck + climbing)
+    assert r["ahead"] == pytest.approx(4.0) and r["ahead_high"] == pytest.approx(8.0)
+    assert r["still_rising"] == 2 and r["converged"] is False
+    assert r["final_high"] - r["final_low"] > 50                     # the spread the old rule took as tolerance
+
+
+def test_one_seed_or_too_few_evaluations_have_no_verdict_and_bad_input_is_refused():
     assert convergence([(STEPS, STEPS / 1000)])["converged"] is None
+    sparse = [(np.array([1000.0, 10_000.0]), np.array([-50.0, v])) for v in (-10.0, -12.0)]
+    assert convergence(sparse)["converged"] is None                  # one evaluation in the last half
     with pytest.raises(ValueError, match=r"runs=\[\]"):
         convergence([])
-    with pytest.raises(ValueError, match=r"tail=1.5: .* \(0, 1\)"):
-        convergence([(STEPS, STEPS)], tail=1.5)
 
 
 def test_agents_are_read_at_the_smallest_budget():
