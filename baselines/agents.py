@@ -14,7 +14,6 @@ import hashlib
 import json
 import os
 import shutil
-from importlib.metadata import version
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import numpy as np
 from softenv.envs.config import config_key, make_config
 
 from .evaluate import scene_kwargs
+from .fingerprint import PROBE_ENVS, library_versions, probe_steps, rollout_digest
 from .policies import SB3Policy
 
 HYPERPARAMS = files(__package__ or "softenv.baselines") / "hyperparams"     # package data
@@ -36,8 +36,6 @@ ALGOS: dict[str, tuple[str, str]] = {
     "sac-her": ("SAC", "her.yml"),
 }
 AGENT_FORMAT_VERSION = 3        # 3: the dynamics' digest and the libraries' versions; 2: the model's digest
-TRAINING_LIBRARIES = ("stable-baselines3", "torch", "gymnasium", "numpy")
-PROBE_ENVS = 2
 
 
 def _literal_dict(text: str) -> dict[str, Any]:
@@ -74,13 +72,6 @@ def agent_env_kwargs(algo: str, scene: str, split: str = "test") -> tuple[str, d
     return env_id, kwargs
 
 
-def _scene_sections(algo: str, scene: str) -> dict[str, Any]:
-    """The scene sections ``make_config`` takes for ``algo`` on ``scene`` (its env kwargs but the observation mode)."""
-    kwargs = agent_env_kwargs(algo, scene)[1]
-    kwargs.pop("obs_mode")
-    return kwargs
-
-
 def _layout(algo: str, scene: str) -> dict[str, Any]:
     sections = agent_env_kwargs(algo, scene)[1]
     obs_mode = sections.pop("obs_mode")
@@ -100,34 +91,16 @@ def make_training_env(algo: str, scene: str, n_envs: int, split: str = "train") 
 
 
 def dynamics_digest(algo: str, scene: str) -> str:
-    """SHA-256 of what ``algo``'s training and evaluation envs on ``scene`` return (observations, rewards,
-    episode ends, bit for bit) to seeded random actions over one episode and into the next (the
-    autoreset): it changes with any change to the simulator, the scene or the targets that such a
-    rollout reaches, and not with refactors that leave every step's floats alone. A change no random
-    step reaches (a branch only a policy's deliberate action takes) must bump :data:`AGENT_FORMAT_VERSION`."""
-    digest = hashlib.sha256()
-    rng = np.random.default_rng(0)
-    horizon = make_config(**_scene_sections(algo, scene))["task"]["horizon"]
-    for split in ("train", "test"):
-        env = make_training_env(algo, scene, PROBE_ENVS, split)
-        try:
-            env.seed(0)
-            obs = env.reset()
-            for _ in range(horizon + 10):
-                for part in (obs[k] for k in sorted(obs)) if isinstance(obs, dict) else (obs,):
-                    digest.update(np.ascontiguousarray(part).tobytes())
-                obs, reward, done, _ = env.step(rng.uniform(-1.0, 1.0, (PROBE_ENVS, 4)).astype(np.float32))
-                digest.update(np.ascontiguousarray(reward).tobytes() + np.ascontiguousarray(done).tobytes())
-        finally:
-            env.close()
-    return digest.hexdigest()
+    """:func:`~baselines.fingerprint.rollout_digest` of ``algo``'s training envs on ``scene`` (the SB3 adapter,
+    float32, as training sees them). A change no random step reaches must bump :data:`AGENT_FORMAT_VERSION`."""
+    return rollout_digest(lambda split: make_training_env(algo, scene, PROBE_ENVS, split),
+                          probe_steps(agent_env_kwargs(algo, scene)[1]))
 
 
 def training_fingerprint(algo: str, scene: str) -> dict[str, Any]:
     """What a trained agent depends on beyond its settings: the training libraries' versions and
     :func:`dynamics_digest`. A finished run is reused, and a tuning study resumed, only when it matches."""
-    return {"libraries": {name: version(name) for name in TRAINING_LIBRARIES},
-            "dynamics": dynamics_digest(algo, scene)}
+    return {"libraries": library_versions(), "dynamics": dynamics_digest(algo, scene)}
 
 
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,

@@ -36,7 +36,8 @@ from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 from .agents import ALGOS, hyperparams, load_agent, train_agent
 from .anchors import ORACLE, anchor_job
 from .curves import RULE, Curve, convergence, convergence_report, learning_curve
-from .minari_datasets import KINDS, dataset_id, load_or_make
+from .fingerprint import library_versions
+from .minari_datasets import KINDS, dataset_id, load_or_make, simulator_digest
 from .evaluate import CLINICAL, GRADED_SCENES, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
 from .policies import BASELINES, applies, make_baseline
 from .run_store import RunStore
@@ -262,7 +263,8 @@ def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: in
     _torch_single_thread()
     method, kind = offline_parts(algo)
     args = offline.OfflineArgs(method=method, steps=budget or OFFLINE_STEPS[method])
-    meta = {"scene": scene, "dataset": dataset_id(scene, kind), "dataset_episodes": dataset_episodes, "seed": seed}
+    meta = {"scene": scene, "dataset": dataset_id(scene, kind), "dataset_episodes": dataset_episodes, "seed": seed,
+            "dynamics": simulator_digest(scene), "libraries": library_versions(("torch", "torchrl", "gymnasium", "numpy"))}
     path = Path(run_dir) / "actor.pt"
     try:
         actor, _ = offline.load(path, meta | {"args": asdict(args)})

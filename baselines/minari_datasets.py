@@ -50,6 +50,7 @@ from softenv.training.trainee import degrade, expert_hand_log
 from .agents import hyperparams, load_agent, train_agent
 from .anchors import compute_anchors, oracle_of, scene_config
 from .evaluate import EPISODES, SCENES, TRAIN_SPLIT, device_kind, episode_seeds, evaluate, scene_kwargs
+from .fingerprint import PROBE_ENVS, probe_steps, rollout_digest
 from .planner import ReplayPolicy, TrajectoryOracle
 from .policies import Policy, RandomPolicy, ZeroPolicy, make_baseline
 
@@ -157,6 +158,16 @@ def _sections(scene: str) -> dict[str, Any]:
     _, kwargs = scene_kwargs(scene, split=TRAIN_SPLIT)
     kwargs.pop("obs_mode")
     return kwargs
+
+
+def simulator_digest(scene: str) -> str:
+    """:func:`~baselines.fingerprint.rollout_digest` of the scene's numpy twin (batched, bit for bit the
+    single env a dataset is recorded in): a dataset records it, and is made again when it changes."""
+    def numpy_twin(split: str) -> Any:
+        env_id, kwargs = scene_kwargs(scene, split=split)
+        return gym.make_vec(env_id, num_envs=PROBE_ENVS, vectorization_mode="vector_entry_point", **kwargs)
+
+    return rollout_digest(numpy_twin, probe_steps(scene_kwargs(scene)[1]))
 
 
 def make_env(scene: str, split: str = TRAIN_SPLIT) -> gym.Env:
@@ -294,7 +305,7 @@ def make_dataset(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
     env.close()
     dataset.storage.update_metadata({"softenv": json.dumps({
         "format_version": VERSION, "scene": scene, "kind": kind, "demonstrator": src.algorithm, **src.details,
-        "scene_config": make_config(**_sections(scene)), "episodes": episodes, "seeds": seeds,
+        "scene_config": make_config(**_sections(scene)), "dynamics": simulator_digest(scene), "episodes": episodes, "seeds": seeds,
         "reference_episodes": reference_episodes, "returns": returns, "clinical": clinical,
         "softenv": softenv.__version__, "commit": code_revision(), "seconds": time.perf_counter() - started})})
     return minari.load_dataset(name)
@@ -321,7 +332,8 @@ def softenv_metadata(dataset: Any) -> dict[str, Any]:
 def load_or_make(scene: str, kind: str, episodes: int = 100, runs_dir: str | Path = "runs",
                  echo: Callable[[str], None] | None = None, reference_episodes: int | None = None) -> Any:
     """The dataset from Minari's local store when it holds ``episodes`` episodes made by this softenv's
-    version of it (and, where given, its references average ``reference_episodes`` test episodes), else
+    version of it on this simulator (:func:`simulator_digest`; and, where given, its references average
+    ``reference_episodes`` test episodes), else
     made now, saying so in one line (its references over ``reference_episodes``, default the protocol's)."""
     import minari                                           # the offline extra
 
@@ -331,10 +343,14 @@ def load_or_make(scene: str, kind: str, episodes: int = 100, runs_dir: str | Pat
         dataset = minari.load_dataset(name)
         try:
             meta = softenv_metadata(dataset)
-            if meta["episodes"] == episodes and reference_episodes in (None, meta["reference_episodes"]):
+            if meta["episodes"] != episodes:
+                why = f"it holds {meta['episodes']} episodes, not {episodes}"
+            elif reference_episodes not in (None, meta["reference_episodes"]):
+                why = f"its references average {meta['reference_episodes']} test episodes, not {reference_episodes}"
+            elif meta.get("dynamics") != simulator_digest(scene):
+                why = "it was recorded on another simulator"
+            else:
                 return dataset
-            why = (f"it holds {meta['episodes']} episodes, not {episodes}" if meta["episodes"] != episodes else
-                   f"its references average {meta['reference_episodes']} test episodes, not {reference_episodes}")
         except ValueError as exc:
             why = str(exc)
         say(f"{name}: remade ({why})")

@@ -29,7 +29,8 @@ import shlex
 import signal
 import sys
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -47,8 +48,9 @@ from softenv.stats import bootstrap_ci, nested_interval
 
 from .anchors import anchor_job
 from .evaluate import SCENES, evaluate, normalized_scores, scene_kwargs
+from .fingerprint import PROBE_ENVS, library_versions, probe_steps, rollout_digest
 
-FORMAT_VERSION = 2                # 2: the seed and budget it was trained with
+FORMAT_VERSION = 3                # 3: the fingerprint of its simulator; 2: the seed and budget it was trained with
 
 
 @dataclass
@@ -142,18 +144,30 @@ class Agent(nn.Module):
         return torch.clamp(self.actor_mean(self.norm(obs)), -1.0, 1.0)
 
 
-def make_env(args: Args, split: str = "train") -> Any:
-    if args.scene not in SCENES:
-        raise ValueError(f"unknown scene {args.scene!r}; valid scenes: {list(SCENES)}")
-    env_id, kwargs = scene_kwargs(args.scene)
+def torch_twin(scene: str, num_envs: int, split: str = "train", **options: Any) -> Any:
+    """``scene``'s torch twin on its ``split`` targets, as the torch learners train on it: float32,
+    same-step autoreset, actions unchecked (a learner sends its box's own); ``options`` are further
+    ``gym.make_vec`` keywords (device, target draw, compilation, gradients)."""
+    if scene not in SCENES:
+        raise ValueError(f"unknown scene {scene!r}; valid scenes: {list(SCENES)}")
+    env_id, kwargs = scene_kwargs(scene)
     kwargs["task"] = {**kwargs["task"], "split": split}
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", backend="torch",
+                        dtype=torch.float32, check_actions=False, autoreset_mode="same_step", **kwargs, **options)
+
+
+def twin_fingerprint(scene: str, make: Callable[[int, str], Any]) -> dict[str, Any]:
+    """What a torch-twin learner on ``scene`` depends on beyond its settings (:mod:`baselines.fingerprint`):
+    the libraries' versions and the digest of its env, ``make(num_envs, split)``."""
+    return {"libraries": library_versions(("torch", "gymnasium", "numpy")),
+            "dynamics": rollout_digest(lambda split: make(PROBE_ENVS, split), probe_steps(scene_kwargs(scene)[1]))}
+
+
+def make_env(args: Args, split: str = "train", num_envs: int | None = None) -> Any:
+    options: dict[str, Any] = {"torch_device": args.device, "target_draw": args.target_draw}
     if args.compile_env:    # CUDA graphs overwrite a step's outputs at the next step; the loop is done with them
-        kwargs["compile_options"] = {"mode": "default"}
-        kwargs["cuda_graph"] = usable_device(args.device).type == "cuda"
-    return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
-                        torch_device=args.device, dtype=torch.float32, check_actions=False, autoreset_mode="same_step",
-                        target_draw=args.target_draw,
-                        **kwargs)
+        options |= {"compile_options": {"mode": "default"}, "cuda_graph": usable_device(args.device).type == "cuda"}
+    return torch_twin(args.scene, args.num_envs if num_envs is None else num_envs, split, **options)
 
 
 def train(args: Args, log: Any = print) -> tuple[Agent, dict[str, float]]:
@@ -255,15 +269,24 @@ class TorchPolicy:
 
 
 def save(agent: Agent, args: Args, path: Path) -> None:
-    """Weights and the statistics of the observation normaliser, plain tensors (safe to load), written
-    by rename (a stop leaves the old file or the new one)."""
+    """Weights and the statistics of the observation normaliser, plain tensors (safe to load), with the
+    settings and the fingerprint (:func:`twin_fingerprint`) it was trained with, written by rename (a
+    stop leaves the old file or the new one)."""
     payload = {"format_version": FORMAT_VERSION, "scene": args.scene, "hidden": list(args.hidden),
-               "seed": args.seed, "total_timesteps": args.total_timesteps, "state_dict": agent.state_dict()}
+               "seed": args.seed, "total_timesteps": args.total_timesteps, "fingerprint": fingerprint(args),
+               "state_dict": agent.state_dict()}
     atomic_write(path, lambda fh: torch.save(payload, fh))
 
 
+def fingerprint(args: Args) -> dict[str, Any]:
+    """:func:`twin_fingerprint` of the env ``args`` train on, stepped eagerly (compiling it would cost
+    minutes and change no setting of the simulator)."""
+    return twin_fingerprint(args.scene, lambda n, split: make_env(replace(args, compile_env=False), split, n))
+
+
 def load(path: Path, scene: str, args: Args | None = None) -> Agent:
-    """The agent saved at ``path`` for ``scene``; with ``args``, also of their seed and budget."""
+    """The agent saved at ``path`` for ``scene``; with ``args``, refused unless trained with their seed and
+    budget on the same simulator and libraries (a run to reuse, not merely to evaluate)."""
     data = torch.load(path, weights_only=True, map_location="cpu")
     if data.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{str(path)!r}: format_version={data.get('format_version')!r}; expected {FORMAT_VERSION}")
@@ -272,6 +295,9 @@ def load(path: Path, scene: str, args: Args | None = None) -> Agent:
     if args is not None and (data.get("seed"), data.get("total_timesteps")) != (args.seed, args.total_timesteps):
         raise ValueError(f"{str(path)!r} was trained with seed {data.get('seed')!r} for {data.get('total_timesteps')!r} "
                          f"steps, not seed {args.seed} for {args.total_timesteps}")
+    if args is not None and data["fingerprint"] != (now := fingerprint(args)):
+        raise ValueError(f"{str(path)!r} was trained on another simulator or other libraries "
+                         f"({data['fingerprint']}; now {now})")
     weights = data["state_dict"]
     agent = Agent(weights["norm.mean"].shape[0], 4, data["hidden"], 0.0)
     agent.load_state_dict(weights)

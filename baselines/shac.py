@@ -30,7 +30,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
@@ -38,10 +37,10 @@ from torch import nn
 import softenv  # noqa: F401  (registers the ids)
 from softenv._artifact import atomic_write
 
-from .evaluate import SCENES, evaluate, scene_kwargs
-from .ppo_torch import RunningNorm, TorchPolicy, _mlp
+from .evaluate import SCENES, evaluate
+from .ppo_torch import RunningNorm, TorchPolicy, _mlp, torch_twin, twin_fingerprint
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2               # 2: the fingerprint of its simulator
 
 
 @dataclass
@@ -96,13 +95,14 @@ class ShacAgent(nn.Module):
         return torch.tanh(self.actor(self.norm(obs)))
 
 
-def make_env(args: ShacArgs) -> Any:
-    """The scene's differentiable torch twin on its training targets (float32, same-step autoreset)."""
-    env_id, kwargs = scene_kwargs(args.scene)
-    kwargs["task"] = {**kwargs["task"], "split": "train"}
-    return gym.make_vec(env_id, num_envs=args.num_envs, vectorization_mode="vector_entry_point", backend="torch",
-                        dtype=torch.float32, check_actions=False, autoreset_mode="same_step", differentiable=True,
-                        **kwargs)
+def make_env(args: ShacArgs, split: str = "train", num_envs: int | None = None) -> Any:
+    """The scene's differentiable torch twin (:func:`~baselines.ppo_torch.torch_twin`), on its training targets."""
+    return torch_twin(args.scene, args.num_envs if num_envs is None else num_envs, split, differentiable=True)
+
+
+def fingerprint(args: ShacArgs) -> dict[str, Any]:
+    """:func:`~baselines.ppo_torch.twin_fingerprint` of the env ``args`` train on."""
+    return twin_fingerprint(args.scene, lambda n, split: make_env(args, split, n))
 
 
 def lambda_returns(rewards: torch.Tensor, values: torch.Tensor, ends: torch.Tensor, gamma: float,
@@ -223,18 +223,23 @@ def as_policy(agent: ShacAgent) -> TorchPolicy:
 
 def save(agent: ShacAgent, args: ShacArgs, path: Path) -> None:
     """Weights and the observation statistics, plain tensors (safe to load), written by rename."""
-    payload = {"format_version": FORMAT_VERSION, "args": asdict(args), "state_dict": agent.state_dict()}
+    payload = {"format_version": FORMAT_VERSION, "args": asdict(args), "fingerprint": fingerprint(args),
+               "state_dict": agent.state_dict()}
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda fh: torch.save(payload, fh))
 
 
 def load(path: Path, args: ShacArgs) -> ShacAgent:
-    """The agent saved at ``path``, refused unless it was trained with exactly ``args``."""
+    """The agent saved at ``path``, refused unless it was trained with exactly ``args`` on the same
+    simulator and libraries (:func:`fingerprint`)."""
     data = torch.load(path, weights_only=True, map_location="cpu")
     if data.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{str(path)!r}: format_version={data.get('format_version')!r}; expected {FORMAT_VERSION}")
     if data.get("args") != asdict(args):
         raise ValueError(f"{str(path)!r} was trained with {data.get('args')!r}, not {asdict(args)!r}")
+    if data["fingerprint"] != (now := fingerprint(args)):
+        raise ValueError(f"{str(path)!r} was trained on another simulator or other libraries "
+                         f"({data['fingerprint']}; now {now})")
     weights = data["state_dict"]
     agent = ShacAgent(weights["norm.mean"].shape[0], weights[f"actor.{len(args.hidden) * 2}.bias"].shape[0], args.hidden)
     agent.load_state_dict(weights)

@@ -124,6 +124,12 @@ def test_load_or_make_reads_a_match_and_remakes_a_mismatch(made: dict[str, Any],
     assert more.total_episodes == EPISODES + 1
     # the first episodes are the same episodes: each is seeded by its index alone
     assert np.array_equal(next(more.iterate_episodes()).actions, next(made["random"].iterate_episodes()).actions)
+    raw = json.loads(more.storage.metadata["softenv"])
+    more.storage.update_metadata({"softenv": json.dumps({**raw, "dynamics": "0" * 64})})
+    lines.clear()
+    again = md.load_or_make(SCENE, "random", EPISODES + 1, tmp_path, lines.append, reference_episodes=REFERENCES)
+    assert lines == [f"softenv/{SCENE}/random-v0: remade (it was recorded on another simulator)"]
+    assert md.softenv_metadata(again)["dynamics"] == md.simulator_digest(SCENE) == raw["dynamics"]
 
 
 @pytest.mark.parametrize(("scene", "kind", "named"), [("SoftSphere-v0", "expert", "scene='SoftSphere-v0'"),

@@ -59,7 +59,13 @@ def test_weights_load_back_and_mismatches_are_refused(trained, tmp_path):
     np.testing.assert_array_equal(TorchPolicy(load(path, "SoftSphere-v0")).predict(obs), TorchPolicy(agent).predict(obs))
     with pytest.raises(ValueError, match="trained on scene 'SoftSphere-v0', not 'SoftSphereProcedure-v0'"):
         load(path, "SoftSphereProcedure-v0")
+    assert load(path, "SoftSphere-v0", args) is not None                 # a run to reuse: same simulator
     data = torch.load(path, weights_only=True)
+    for part, changed in (("dynamics", "0" * 64), ("libraries", {**data["fingerprint"]["libraries"], "torch": "0.1"})):
+        torch.save({**data, "fingerprint": {**data["fingerprint"], part: changed}}, path)
+        with pytest.raises(ValueError, match="trained on another simulator or other libraries"):
+            load(path, "SoftSphere-v0", args)
+        load(path, "SoftSphere-v0")                                         # to evaluate, any simulator will do
     data["format_version"] = 99
     torch.save(data, path)
     with pytest.raises(ValueError, match="format_version=99"):

@@ -99,6 +99,10 @@ def test_shac_learns_reproducibly_and_saves_what_it_learned(tmp_path):
     assert torch.equal(loaded.deterministic(obs), agent.deterministic(obs))
     with pytest.raises(ValueError, match="was trained with"):
         shac.load(path, shac.ShacArgs(total_timesteps=999_999))
+    data = torch.load(path, weights_only=True)
+    torch.save({**data, "fingerprint": {**data["fingerprint"], "dynamics": "0" * 64}}, path)
+    with pytest.raises(ValueError, match="trained on another simulator or other libraries"):
+        shac.load(path, args)
 
 
 @pytest.mark.parametrize("change, message", [({"scene": "Nope-v0"}, "scene='Nope-v0'"),
