@@ -14,6 +14,7 @@ import hashlib
 import json
 import os
 import shutil
+import time
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -164,6 +165,7 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     eval_env.seed(seed)                          # else its first reset draws from entropy: the curve would not repeat
     callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
                             log_path=str(partial / "eval"), best_model_save_path=str(partial / "best"), verbose=0)
+    began = time.perf_counter()
     try:
         model.learn(budget, callback=callback, progress_bar=progress and _has_progress_bar())
     finally:                                     # the logger's files too: an open progress.csv outlived its run
@@ -171,7 +173,8 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
         env.close()
         eval_env.close()
     model.save(partial / "model.zip")
-    meta = {**wanted, "model_sha256": _sha256(partial / "model.zip")}
+    # the training's wall time (with its evaluations) is a record, not a setting: reuse does not compare it
+    meta = {**wanted, "model_sha256": _sha256(partial / "model.zip"), "train_seconds": time.perf_counter() - began}
     (partial / "agent.json").write_text(json.dumps(meta, indent=2))
     if out.exists():
         shutil.rmtree(out)                       # a run of other settings, or one not reused

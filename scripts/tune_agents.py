@@ -53,22 +53,31 @@ GAMMAS = (0.9, 0.95, 0.98, 0.99, 0.995, 0.999)
 LEARNING_RATES = (1e-5, 1e-3)
 
 
-def trained_error(args: argparse.Namespace, overrides: dict[str, float], number: int, seed: int) -> float:
+def trained_error(args: argparse.Namespace, overrides: dict[str, float], number: int, seed: int) -> tuple[float, float | None]:
     """Train (or load the finished run of) trial ``number``'s values on ``seed``: its mean summed shape error
-    over the first ``--episodes`` training-target episodes."""
+    over the first ``--episodes`` training-target episodes, and the training's wall time in seconds as its
+    ``agent.json`` records it (None for a run trained before agents recorded it)."""
     run_dir = args.runs / args.scene.replace("/", "_") / f"{args.algo}-trial{number}-seed{seed}"
     model = train_agent(args.algo, args.scene, seed, run_dir, args.timesteps, progress=False, overrides=overrides)
     played = evaluate(load_agent(model, args.scene), args.scene, args.episodes, list(range(args.episodes)),
                       task={"split": "train"})
-    return float(played.values["error_sum_mm"].mean())
+    seconds = json.loads((run_dir / "agent.json").read_text()).get("train_seconds")
+    return float(played.values["error_sum_mm"].mean()), seconds
 
 
 def objective(trial: optuna.Trial, args: argparse.Namespace) -> float:
     overrides = {"gamma": trial.suggest_categorical("gamma", GAMMAS),
                  "learning_rate": trial.suggest_float("learning_rate", *LEARNING_RATES, log=True)}
-    errors = [trained_error(args, overrides, trial.number, seed) for seed in args.seeds]
-    trial.set_user_attr("error_by_seed", errors)
+    errors, seconds = zip(*(trained_error(args, overrides, trial.number, seed) for seed in args.seeds))
+    trial.set_user_attr("error_by_seed", list(errors))
+    trial.set_user_attr("train_seconds", list(seconds))
     return sum(errors) / len(errors)
+
+
+def minutes(seconds: list[float | None]) -> str:
+    """The trainings' total wall time in minutes, or "-" where a run did not record it."""
+    known = [s for s in seconds if s is not None]
+    return f"{sum(known) / 60:.1f}" if len(known) == len(seconds) else "-"
 
 
 def confirm(finished: list[optuna.trial.FrozenTrial], args: argparse.Namespace) -> list[dict[str, Any]]:
@@ -78,10 +87,11 @@ def confirm(finished: list[optuna.trial.FrozenTrial], args: argparse.Namespace) 
     chosen = ranked[:args.confirm] + [t for t in ranked[args.confirm:] if t.user_attrs.get("yaml")]
     rows = []
     for t in chosen:
-        errors = [trained_error(args, t.params, t.number, seed) for seed in args.confirm_seeds]
+        errors, seconds = zip(*(trained_error(args, t.params, t.number, seed) for seed in args.confirm_seeds))
         mean, low, high = bootstrap_ci(np.array(errors))
         rows.append({"number": t.number, "yaml": bool(t.user_attrs.get("yaml")), **t.params,
-                     "error_by_seed": errors, "mean": mean, "ci_low": low, "ci_high": high})
+                     "error_by_seed": list(errors), "train_seconds": list(seconds), "mean": mean, "ci_low": low,
+                     "ci_high": high})
         print(f"confirm trial {t.number}: mean error sum {mean:.2f} [{low:.2f}, {high:.2f}] over seeds "
               f"{args.confirm_seeds}", flush=True)
     return sorted(rows, key=lambda r: r["mean"])
@@ -139,9 +149,7 @@ def main() -> None:
         # proposed next: a resumed search is the same search (one seeded once would start its stream again)
         study.sampler = optuna.samplers.TPESampler(seed=len(finished), n_startup_trials=5)
         trial = study.ask()
-        began = time.perf_counter()
         value = objective(trial, args)
-        trial.set_user_attr("seconds", time.perf_counter() - began)
         study.tell(trial, value)
         print(f"trial {trial.number}: gamma {trial.params['gamma']}, learning_rate {trial.params['learning_rate']:.3g}: "
               f"mean error sum {value:.2f} mm-steps", flush=True)
@@ -159,10 +167,11 @@ def main() -> None:
               f"Search: Optuna {optuna.__version__} TPE (seed 0, 5 random trials first), gamma in {list(GAMMAS)}, "
               f"learning_rate log-uniform in {list(LEARNING_RATES)}. The YAML's values: gamma "
               f"{yaml_params.get('gamma')}, learning_rate {yaml_params.get('learning_rate')}.\n")
-    rows = ["| trial | gamma | learning_rate | mean error sum | by seed | minutes |", "|---|---|---|---|---|---|"]
+    rows = ["| trial | gamma | learning_rate | mean error sum | by seed | training minutes |", "|---|---|---|---|---|---|"]
     rows += [f"| {t.number}{' (the YAML)' if t.user_attrs.get('yaml') else ''} | "
              f"{t.params['gamma']} | {t.params['learning_rate']:.3g} | {t.value:.2f} | "
-             f"{', '.join(f'{e:.2f}' for e in t.user_attrs['error_by_seed'])} | {t.user_attrs['seconds'] / 60:.1f} |"
+             f"{', '.join(f'{e:.2f}' for e in t.user_attrs['error_by_seed'])} | "
+             f"{minutes(t.user_attrs.get('train_seconds', [None]))} |"
              for t in sorted(finished, key=lambda t: t.value)]
     best_line = (f"\nBest: trial {best.number}, gamma {best.params['gamma']}, learning_rate "
                  f"{best.params['learning_rate']:.3g} (mean error sum {best.value:.2f}); its YAML entry: `{stem}.yml`. "
@@ -174,10 +183,12 @@ def main() -> None:
         confirmation = (
             f"\n## Confirmation on seeds {args.confirm_seeds}\n\nThe {args.confirm} best trials and the YAML's values, "
             f"each trained again on seeds the search did not use; mean summed shape error [95 % bootstrap interval "
-            "over the seeds]:\n\n| trial | gamma | learning_rate | mean error sum | by seed |\n|---|---|---|---|---|\n"
+            "over the seeds]:\n\n| trial | gamma | learning_rate | mean error sum | by seed | training minutes |\n"
+            "|---|---|---|---|---|---|\n"
             + "".join(f"| {r['number']}{' (the YAML)' if r['yaml'] else ''} | {r['gamma']} | {r['learning_rate']:.3g} "
                       f"| {r['mean']:.2f} [{r['ci_low']:.2f}, {r['ci_high']:.2f}] | "
-                      f"{', '.join(f'{e:.2f}' for e in r['error_by_seed'])} |\n" for r in confirmed)
+                      f"{', '.join(f'{e:.2f}' for e in r['error_by_seed'])} | {minutes(r['train_seconds'])} |\n"
+                      for r in confirmed)
             + ("\nVerdict: keep the YAML's values: no trial's interval lies wholly below the YAML's, so the seeds do "
                "not tell them apart from it.\n" if kept else
                f"\nVerdict: adopt trial {choice['number']} (gamma {choice['gamma']}, learning_rate "

@@ -59,6 +59,11 @@ def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     assert entry["n_timesteps"] == 300_000                   # the YAML's budget, not the search's
     for trial in record["trials"]:                           # its score is its own agent's, on training targets
         assert trial["value"] == sum(trial["error_by_seed"]) / len(trial["error_by_seed"]) > 0
+        # its training time is the one agent.json recorded when the agent was trained, also when re-read
+        run = tmp_path / "runs" / "SoftSphere-v0" / f"ppo-trial{trial['number']}-seed0"
+        assert trial["train_seconds"] == [json.loads((run / "agent.json").read_text())["train_seconds"]]
+        assert trial["train_seconds"][0] > 0
+    assert "| training minutes |" in (tmp_path / "out" / "SoftSphere-v0__ppo.md").read_text()
     # the confirmation: the best trial and the YAML's trained again on two other seeds, decided by their intervals
     bad = _tune(tmp_path, 3, "--confirm", "1", "--confirm-seeds", "0", "5")
     assert bad.returncode == 2 and "--confirm-seeds [0, 5]" in bad.stderr and "none of --seeds [0]" in bad.stderr
