@@ -36,7 +36,8 @@ ALGOS: dict[str, tuple[str, str]] = {
     "td3": ("TD3", "td3.yml"),
     "sac-her": ("SAC", "her.yml"),
 }
-AGENT_FORMAT_VERSION = 3        # 3: the dynamics' digest and the libraries' versions; 2: the model's digest
+AGENT_FORMAT_VERSION = 4        # 4: the hyper-parameters; 3: the dynamics' digest and the libraries' versions;
+                                # 2: the model's digest
 
 
 def _literal_dict(text: str) -> dict[str, Any]:
@@ -128,13 +129,15 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
         raise ValueError(f"overrides {unknown} are not hyper-parameters of {algo} on {env_id}; "
                          f"those it has: {sorted(params)}")
     params.update(overrides or {})
+    # every hyper-parameter it trains with, as JSON reads it back: a YAML changed under a kept run retrains it
+    resolved = json.loads(json.dumps(params, sort_keys=True))
     n_envs = int(params.pop("n_envs", 1))
     budget = int(timesteps if timesteps is not None else params.pop("n_timesteps"))
     params.pop("n_timesteps", None)
     params.pop("env_kwargs", None)               # for the env (make_training_env), not the algorithm
     out = Path(out_dir)
     wanted = {"format_version": AGENT_FORMAT_VERSION, "algo": algo, "seed": seed, "timesteps": budget,
-              "overrides": dict(overrides or {}), **_layout(algo, scene),
+              "overrides": dict(overrides or {}), "hyperparams": resolved, **_layout(algo, scene),
               **training_fingerprint(algo, scene)}
     if reuse and finished_run(out, wanted) is None:
         return out / "model.zip"

@@ -30,7 +30,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -50,7 +50,7 @@ from .anchors import anchor_job
 from .evaluate import SCENES, evaluate, normalized_scores, scene_kwargs
 from .fingerprint import PROBE_ENVS, library_versions, probe_steps, rollout_digest
 
-FORMAT_VERSION = 3                # 3: the fingerprint of its simulator; 2: the seed and budget it was trained with
+FORMAT_VERSION = 3                # 3: every setting and the fingerprint of its simulator; 2: the seed and budget
 
 
 @dataclass
@@ -273,9 +273,13 @@ def save(agent: Agent, args: Args, path: Path) -> None:
     settings and the fingerprint (:func:`twin_fingerprint`) it was trained with, written by rename (a
     stop leaves the old file or the new one)."""
     payload = {"format_version": FORMAT_VERSION, "scene": args.scene, "hidden": list(args.hidden),
-               "seed": args.seed, "total_timesteps": args.total_timesteps, "fingerprint": fingerprint(args),
-               "state_dict": agent.state_dict()}
+               "settings": settings(args), "fingerprint": fingerprint(args), "state_dict": agent.state_dict()}
     atomic_write(path, lambda fh: torch.save(payload, fh))
+
+
+def settings(args: Args) -> dict[str, Any]:
+    """What of ``args`` an agent is trained with: every argument but where it runs (device, compilation)."""
+    return {k: v for k, v in asdict(args).items() if k not in ("device", "compile_env")}
 
 
 def fingerprint(args: Args) -> dict[str, Any]:
@@ -285,16 +289,18 @@ def fingerprint(args: Args) -> dict[str, Any]:
 
 
 def load(path: Path, scene: str, args: Args | None = None) -> Agent:
-    """The agent saved at ``path`` for ``scene``; with ``args``, refused unless trained with their seed and
-    budget on the same simulator and libraries (a run to reuse, not merely to evaluate)."""
+    """The agent saved at ``path`` for ``scene``; with ``args``, refused unless trained with their
+    :func:`settings` on the same simulator and libraries (a run to reuse, not merely to evaluate)."""
     data = torch.load(path, weights_only=True, map_location="cpu")
     if data.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{str(path)!r}: format_version={data.get('format_version')!r}; expected {FORMAT_VERSION}")
     if data.get("scene") != scene:
         raise ValueError(f"{str(path)!r} was trained on scene {data.get('scene')!r}, not {scene!r}")
-    if args is not None and (data.get("seed"), data.get("total_timesteps")) != (args.seed, args.total_timesteps):
-        raise ValueError(f"{str(path)!r} was trained with seed {data.get('seed')!r} for {data.get('total_timesteps')!r} "
-                         f"steps, not seed {args.seed} for {args.total_timesteps}")
+    if args is not None and data.get("settings") != settings(args):
+        other = {k: (v, data.get("settings", {}).get(k)) for k, v in settings(args).items()
+                 if data.get("settings", {}).get(k) != v}
+        raise ValueError(f"{str(path)!r} was trained with other settings: "
+                         + ", ".join(f"{k}={b!r} (asked {a!r})" for k, (a, b) in other.items()))
     if args is not None and data["fingerprint"] != (now := fingerprint(args)):
         raise ValueError(f"{str(path)!r} was trained on another simulator or other libraries "
                          f"({data['fingerprint']}; now {now})")

@@ -137,7 +137,7 @@ def _weights(path) -> list[np.ndarray]:
     return [p.detach().numpy().copy() for p in policy.model.policy.parameters()]
 
 
-def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(tmp_path):
+def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(tmp_path, monkeypatch):
     whole = train_agent("sac", "SoftSphere-v0", 0, tmp_path / "whole", timesteps=1100, progress=False)
     out = tmp_path / "stopped"
     partial = tmp_path / "stopped.partial"           # what a run killed mid-training leaves
@@ -165,6 +165,17 @@ def test_a_stopped_training_starts_again_from_its_seed_and_gives_the_same_agent(
     assert load_agent(tuned, "SoftSphere-v0").model.gamma == 0.9
     train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
     assert json.loads((out / "agent.json").read_text())["overrides"] == {}
+    # and so is the YAML itself: a run kept while its entry changes (a tuned value adopted) is trained again
+    import softenv.baselines.agents as agents
+
+    meta = json.loads((out / "agent.json").read_text())
+    assert meta["hyperparams"]["gamma"] == hyperparams("sac", "SoftSphere-v0")["gamma"]
+    stamp = (out / "model.zip").stat().st_mtime_ns
+    yaml_entry = agents.hyperparams
+    monkeypatch.setattr(agents, "hyperparams", lambda algo, env_id: {**yaml_entry(algo, env_id), "gamma": 0.5})
+    train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False)
+    assert json.loads((out / "agent.json").read_text())["hyperparams"]["gamma"] == 0.5
+    assert (out / "model.zip").stat().st_mtime_ns != stamp
     with pytest.raises(ValueError, match=r"overrides \['gama'\] are not hyper-parameters of sac"):
         train_agent("sac", "SoftSphere-v0", 0, out, timesteps=1200, progress=False, overrides={"gama": 0.9})
 

@@ -59,7 +59,9 @@ def test_weights_load_back_and_mismatches_are_refused(trained, tmp_path):
     np.testing.assert_array_equal(TorchPolicy(load(path, "SoftSphere-v0")).predict(obs), TorchPolicy(agent).predict(obs))
     with pytest.raises(ValueError, match="trained on scene 'SoftSphere-v0', not 'SoftSphereProcedure-v0'"):
         load(path, "SoftSphereProcedure-v0")
-    assert load(path, "SoftSphere-v0", args) is not None                 # a run to reuse: same simulator
+    assert load(path, "SoftSphere-v0", args) is not None                 # a run to reuse: same settings and simulator
+    with pytest.raises(ValueError, match=r"other settings: gamma=0.95 \(asked 0.9\)"):
+        load(path, "SoftSphere-v0", Args(seed=0, gamma=0.9, **SHORT))
     data = torch.load(path, weights_only=True)
     for part, changed in (("dynamics", "0" * 64), ("libraries", {**data["fingerprint"]["libraries"], "torch": "0.1"})):
         torch.save({**data, "fingerprint": {**data["fingerprint"], part: changed}}, path)
