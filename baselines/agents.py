@@ -105,6 +105,13 @@ def training_fingerprint(algo: str, scene: str) -> dict[str, Any]:
     return {"libraries": library_versions(), "dynamics": dynamics_digest(algo, scene)}
 
 
+def recorded_train_seconds(run_dir: Path) -> float | None:
+    """The wall time in seconds a finished run's training took (with its evaluations), as its ``agent.json``
+    recorded it; None for a run trained before agents recorded it."""
+    seconds = json.loads((run_dir / "agent.json").read_text()).get("train_seconds")
+    return None if seconds is None else float(seconds)
+
+
 def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps: int | None = None,
                 progress: bool = True, eval_episodes: int = 20, reuse: bool = True,
                 overrides: dict[str, Any] | None = None) -> Path:

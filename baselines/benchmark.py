@@ -33,9 +33,9 @@ from softenv.envs.world import World
 
 from softenv.parallel import Interrupted, Job, JobResult, describe, run_jobs
 
-from .agents import ALGOS, hyperparams, load_agent, train_agent
+from .agents import ALGOS, hyperparams, load_agent, recorded_train_seconds, train_agent
 from .anchors import ORACLE, anchor_job
-from .curves import RULE, Curve, convergence, convergence_report, learning_curve
+from .curves import RISING, RULE, Curve, convergence, convergence_report, learning_curve
 from .fingerprint import library_versions
 from .minari_datasets import KINDS, dataset_id, load_or_make, simulator_digest
 from .evaluate import CLINICAL, GRADED_SCENES, METRICS, SCENES, Episodes, device_kind, evaluate, normalized_scores, scene_kwargs
@@ -191,26 +191,27 @@ def baseline_job(name: str, scene: str, episodes: int, vectorization_mode: str =
     return evaluate(planner, scene, episodes, vectorization_mode=vectorization_mode, **make)
 
 
-AgentResult = tuple[Episodes, Curve | None]
+# the episodes, the learning curve, and the training's wall time in seconds as its run recorded it
+AgentResult = tuple[Episodes, Curve | None, float | None]
 
 
 def agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
     """Train one agent (or load it, when ``run_dir`` holds its finished run) and evaluate it; also returns
-    its learning curve (test-target return against env steps), so the driver needs no access to the
-    worker's files."""
-    evaluated, curve = transfer_job(algo, scene, seed, run_dir, budget, episodes, (scene,))
-    return evaluated[0], curve
+    its learning curve (test-target return against env steps) and the seconds its training took (None for
+    a run that did not record them), so the driver needs no access to the worker's files."""
+    evaluated, curve, seconds = transfer_job(algo, scene, seed, run_dir, budget, episodes, (scene,))
+    return evaluated[0], curve, seconds
 
 
 def transfer_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
-                 eval_scenes: tuple[str, ...]) -> tuple[list[Episodes], Curve | None]:
+                 eval_scenes: tuple[str, ...]) -> tuple[list[Episodes], Curve | None, float | None]:
     """Train one agent on ``scene`` (or load its finished run), then evaluate it on each of ``eval_scenes``
-    (scenes of one observation and action space: the airway grades); its learning curve as :func:`agent_job`'s."""
+    (scenes of one observation and action space: the airway grades); its curve and time as :func:`agent_job`'s."""
     _torch_single_thread()
     path = train_agent(algo, scene, seed, Path(run_dir), budget, progress=False)
     agent = load_agent(path, scene)
     evaluated = [evaluate(agent, other, episodes) for other in eval_scenes]
-    return evaluated, learning_curve(Path(run_dir))
+    return evaluated, learning_curve(Path(run_dir)), recorded_train_seconds(Path(run_dir))
 
 
 def transfer_key(scene: str, algo: str, seed: int) -> str:
@@ -234,12 +235,12 @@ def torch_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int 
         agent, _ = ppo_torch.train(args, log=lambda line: None)
         path.parent.mkdir(parents=True, exist_ok=True)
         ppo_torch.save(agent, args, path)
-    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None
+    return evaluate(ppo_torch.TorchPolicy(agent), scene, episodes), None, None
 
 
 def shac_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int) -> AgentResult:
     """Train (or load) one SHAC agent (``baselines/shac.py``) through the differentiable torch twin on CPU
-    tensors, and evaluate it; its learning curve as :func:`agent_job`'s."""
+    tensors, and evaluate it; its curve and time as :func:`agent_job`'s."""
     from . import shac                                      # torch: the rl extra
 
     _torch_single_thread()
@@ -250,9 +251,9 @@ def shac_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int |
     try:
         agent = shac.load(path, args)
     except (FileNotFoundError, ValueError):                 # none yet, or of other settings: train it
-        agent, _ = shac.train(args, Path(run_dir), log=lambda line: None)
-        shac.save(agent, args, path)
-    return evaluate(shac.as_policy(agent), scene, episodes), learning_curve(Path(run_dir))
+        agent, figures = shac.train(args, Path(run_dir), log=lambda line: None)
+        shac.save(agent, args, path, figures["wall_s"])
+    return evaluate(shac.as_policy(agent), scene, episodes), learning_curve(Path(run_dir)), shac.train_seconds(path)
 
 
 def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: int | None, episodes: int,
@@ -274,7 +275,7 @@ def offline_agent_job(algo: str, scene: str, seed: int, run_dir: str, budget: in
         dataset = load_or_make(scene, kind, dataset_episodes, Path(run_dir).parent.parent)
         actor = offline.train(dataset, args, seed, log=lambda line: None)
         offline.save(actor, args, meta, path)
-    return evaluate(offline.OfflinePolicy(actor, algo), scene, episodes), None
+    return evaluate(offline.OfflinePolicy(actor, algo), scene, episodes), None, None
 
 
 def ensure_datasets(plan: Plan, runs_dir: Path, echo: Callable[[str], None]) -> None:
@@ -335,7 +336,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     summaries: list[dict[str, Any]] = []
     timings: dict[str, float] = {}
     curves: dict[tuple[str, str], list[Curve]] = {}
-    walls: dict[tuple[str, str], list[float]] = {}
+    trainings: dict[tuple[str, str], list[float | None]] = {}
     failed = [r for r in results.values() if not r.ok]
     for scene in plan.scenes:
         anchors = results[f"{scene} anchors"]
@@ -363,8 +364,8 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
             done = [r.value for r in runs if r.ok]
             if not done:
                 continue
-            curves[(train, algo)] = [curve for _, curve in done if curve is not None]
-            walls[(train, algo)] = [r.wall_s for r in runs if r.ok]
+            curves[(train, algo)] = [value[1] for value in done if value[1] is not None]
+            trainings[(train, algo)] = [value[2] for value in done]
             pooled = [episodes_of(v) for v in done]
             values = {m: np.concatenate([e.values[m] for e in pooled]) for m in pooled[0].values}
             merged = Episodes(policy, scene, values, float(np.median([e.decision_us for e in pooled])), runs=len(pooled))
@@ -379,7 +380,7 @@ def run(plan: Plan, out_dir: Path, runs_dir: Path, command: str, echo: Callable[
     echo(format_compact(summaries))
     echo(f"\n{len(summaries)} policy x scene cells ({len(grid)} jobs, {how}) in {elapsed:.0f} s")
     if write:
-        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, walls, how, failed, stem, reused)
+        write_reports(summaries, plan, out_dir, command, elapsed, timings, curves, trainings, how, failed, stem, reused)
         echo(f"wrote {out_dir / stem}.md, .csv and .json (every column, the agents' budgets, the clinical metrics), "
              f"{out_dir / _error_plot_name(stem)}, {out_dir / stem}_learning_curves.png and _gallery.png")
     if failed:
@@ -537,10 +538,10 @@ def provenance(command: str) -> dict[str, Any]:
 
 def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, command: str, elapsed: float,
                   timings: dict[str, float], curves: dict[tuple[str, str], list[Curve]],
-                  walls: dict[tuple[str, str], list[float]], how: str, failed: list[Any], stem: str = "benchmark",
+                  trainings: dict[tuple[str, str], list[float | None]], how: str, failed: list[Any], stem: str = "benchmark",
                   reused: int = 0) -> None:
     prov = {**provenance(command), "executor": how, "jobs_from_earlier_runs": reused}
-    curve_table, curve_rows = convergence_report(curves, walls)
+    curve_table, curve_rows = convergence_report(curves, trainings)
 
     def write_csv(fh: Any) -> None:
         fh.write(f"# made by: {command} at {prov['code']} ({prov['date']}; softenv {prov['softenv']}, "
@@ -585,11 +586,10 @@ def write_reports(summaries: list[dict[str, Any]], plan: Plan, out_dir: Path, co
           *(["Agents by training seed (normalized score, mean [95 % bootstrap interval] over each seed's test "
              "episodes; the table above pools them):\n", format_seeds(summaries), ""]
             if any("seed_scores" in s for s in summaries) else []),
-          *([f"Learning curves against the convergence rule (`baselines/curves.py`), on test-target returns: {RULE}. "
-             "A seed is still rising when its own further gain is above 5 % of its own gain so far. Agents compared at equal "
-             "environment steps, not equal wall time: each curve's last evaluation at or before the smallest "
-             "budget among the agents on the scene (mean [95 % interval over seeds]); the job wall time (training "
-             "and test episodes, single-threaded) is beside it.\n", curve_table, ""] if curve_rows else []),
+          *([f"Learning curves against the convergence rule (`baselines/curves.py`), on test-target returns: {RULE}; {RISING}. "
+             "Agents compared at equal environment steps, not equal wall time: each curve's last evaluation at or "
+             "before the smallest budget among the agents on the scene (mean [95 % interval over seeds]); beside "
+             "it, the training's wall time (with its evaluations, single-threaded) as each seed's run recorded it.\n", curve_table, ""] if curve_rows else []),
           f"Files: `{stem}.csv` (all numbers), `{stem}.json` (with per-cell wall times, every episode's score by "
           f"run and the learning curves' points), "
           f"`{_error_plot_name(stem)}`, `{stem}_learning_curves.png`, `{stem}_gallery.png`"
@@ -752,13 +752,13 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[Curve]],
         lows: list[float] = []                     # each curve's band after its first fifth, and before
         firsts: list[float] = []
         highs: list[float] = []
-        rising: list[str] = []                     # agents the convergence rule finds still rising
+        unconverged: list[str] = []                # agents the convergence rule does not find converged
         for algo in plan.agents:
             runs = curves.get((scene, algo), [])
             if not runs:
                 continue
             if convergence(runs)["converged"] is False:
-                rising.append(algo)
+                unconverged.append(algo)
             n = min(len(c[0]) for c in runs)
             steps, values = runs[0][0][:n], np.stack([c[1][:n] for c in runs])
             mean = values.mean(axis=0)
@@ -774,8 +774,8 @@ def _learning_curves(plan: Plan, curves: dict[tuple[str, str], list[Curve]],
             ax.set_ylim(min(lows) - 0.1 * (max(highs) - min(lows)), None)
             ax.text(0.98, 0.02, f"earlier points down to {min(firsts):.0f} below the axis", ha="right",
                     va="bottom", fontsize=6, transform=ax.transAxes)
-        if rising:
-            ax.text(0.02, 0.02, "still rising (rule in the report): " + ", ".join(rising), ha="left", va="bottom",
+        if unconverged:
+            ax.text(0.02, 0.02, "not converged (rule in the report): " + ", ".join(unconverged), ha="left", va="bottom",
                     fontsize=6, transform=ax.transAxes)
         ends = [float(curves[scene, algo][0][0][-1]) for algo in plan.agents if curves.get((scene, algo))]
         if max(ends) >= 4 * min(ends):              # budgets a decade apart: each agent's curve readable

@@ -28,9 +28,14 @@ Curve = tuple[np.ndarray, np.ndarray]        # env steps, mean test-target retur
 TREND = 0.5                  # the last half of the budget: the stretch whose trend the rule reads
 AHEAD = 0.2                  # a further fifth of the budget: the gain the rule projects
 TOLERANCE = 0.05             # of the gain so far: the further gain a plateau may still show
-RULE = ("converged when, by each seed's least-squares trend over the last half of the budget, a further "
-        "20 % of the budget would add less than 5 % of what training gained so far (the trend's end minus "
-        "the first evaluation), at the upper end of the 95 % interval over seeds")
+def _share(fraction: float) -> str:
+    return f"{100 * fraction:g} %"
+
+
+RULE = (f"converged when, by each seed's least-squares trend over the last {_share(TREND)} of the budget, a further "
+        f"{_share(AHEAD)} of the budget would add less than {_share(TOLERANCE)} of what training gained so far (the "
+        "trend's end minus the first evaluation), at the upper end of the 95 % interval over seeds")
+RISING = f"a seed is still rising when its own further gain is above {_share(TOLERANCE)} of its own gain so far"
 
 
 def learning_curve(run_dir: Path) -> Curve | None:
@@ -91,10 +96,11 @@ def at_equal_steps(curves: dict[str, list[Curve]]) -> tuple[int, dict[str, tuple
 
 
 def convergence_report(curves: dict[tuple[str, str], list[Curve]],
-                       walls: dict[tuple[str, str], list[float]]) -> tuple[str, list[dict[str, Any]]]:
+                       trainings: dict[tuple[str, str], list[float | None]]) -> tuple[str, list[dict[str, Any]]]:
     """The report's table of every agent's curves on the scene it trained on (keys ``(scene, agent)``): the
-    rule's verdict, and the return at the smallest budget of the agents on that scene, with each seed's job
-    wall time (training and evaluation). Also the rows as numbers for the JSON."""
+    rule's verdict, and the return at the smallest budget of the agents on that scene, with the seeds' mean
+    training wall time as their runs recorded it (``trainings``: a seed's seconds, None where its run did
+    not record them). Also the rows as numbers for the JSON."""
     rows: list[dict[str, Any]] = []
     for scene in dict.fromkeys(scene for scene, _ in curves):
         agents = {agent: runs for (s, agent), runs in curves.items() if s == scene and runs}
@@ -102,19 +108,28 @@ def convergence_report(curves: dict[tuple[str, str], list[Curve]],
             continue
         steps, equal = at_equal_steps(agents)
         for agent, runs in agents.items():
-            seconds = walls.get((scene, agent), [])
+            seconds = [s for s in trainings.get((scene, agent), []) if s is not None]
             rows.append({"scene": scene, "agent": agent, **convergence(runs), "equal_steps": steps,
                          "at_equal_steps": dict(zip(("mean", "ci_low", "ci_high"), equal[agent])),
-                         "wall_s_per_seed": float(np.mean(seconds)) if seconds else float("nan")})
-    verdict = {True: "yes", False: "no: still rising", None: "- (one seed, or under 2 evaluations in the last half)"}
-    lines = ["| scene | agent | seeds | budget (env steps) | final return | gain a further 20 % would add | "
-             "tolerance (5 % of the gain so far) | seeds still rising | converged | return at equal steps | "
-             "job wall per seed (s) |", "|" + "---|" * 11]
+                         "train_s_per_seed": float(np.mean(seconds)) if seconds else float("nan"),
+                         "train_s_recorded": len(seconds)})
+    verdict = {True: "yes", False: "no", None: "- (one seed, or under 2 evaluations in the last half)"}
+    lines = [f"| scene | agent | seeds | budget (env steps) | final return | gain a further {_share(AHEAD)} would add | "
+             f"tolerance ({_share(TOLERANCE)} of the gain so far) | seeds still rising | converged | "
+             "return at equal steps | training minutes per seed |", "|" + "---|" * 11]
     for r in rows:
         eq = r["at_equal_steps"]
         lines.append(f"| {r['scene']} | {r['agent']} | {r['seeds']} | {r['budget']:,} | {r['final']:.1f} "
                      f"[{r['final_low']:.1f}, {r['final_high']:.1f}] | {r['ahead']:+.1f} [{r['ahead_low']:+.1f}, "
                      f"{r['ahead_high']:+.1f}] | {r['tolerance']:.1f} | {r['still_rising']} of {r['seeds']} | "
                      f"{verdict[r['converged']]} | {eq['mean']:.1f} [{eq['ci_low']:.1f}, {eq['ci_high']:.1f}] at "
-                     f"{r['equal_steps']:,} | {r['wall_s_per_seed']:.0f} |")
+                     f"{r['equal_steps']:,} | {_minutes(r)} |")
     return "\n".join(lines), rows
+
+
+def _minutes(row: dict[str, Any]) -> str:
+    """A row's mean training minutes per seed; the count when only some seeds' runs recorded theirs."""
+    if not row["train_s_recorded"]:
+        return "-"
+    mean = f"{row['train_s_per_seed'] / 60:.1f}"
+    return mean if row["train_s_recorded"] == row["seeds"] else f"{mean} ({row['train_s_recorded']} of {row['seeds']} seeds)"

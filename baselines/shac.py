@@ -221,10 +221,11 @@ def as_policy(agent: ShacAgent) -> TorchPolicy:
     return TorchPolicy(agent, "shac")
 
 
-def save(agent: ShacAgent, args: ShacArgs, path: Path) -> None:
-    """Weights and the observation statistics, plain tensors (safe to load), written by rename."""
+def save(agent: ShacAgent, args: ShacArgs, path: Path, train_seconds: float | None = None) -> None:
+    """Weights and the observation statistics, plain tensors (safe to load), written by rename; with the
+    training's wall time when given (a record, not a setting: :func:`load` does not compare it)."""
     payload = {"format_version": FORMAT_VERSION, "args": asdict(args), "fingerprint": fingerprint(args),
-               "state_dict": agent.state_dict()}
+               "state_dict": agent.state_dict(), "train_seconds": train_seconds}
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, lambda fh: torch.save(payload, fh))
 
@@ -264,3 +265,9 @@ def main(argv: list[str] | None = None) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def train_seconds(path: Path) -> float | None:
+    """The training wall time the agent saved at ``path`` recorded (None: saved without it)."""
+    seconds = torch.load(path, weights_only=True, map_location="cpu").get("train_seconds")
+    return None if seconds is None else float(seconds)

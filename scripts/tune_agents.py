@@ -43,7 +43,7 @@ import torch
 import yaml
 
 from softenv._artifact import write_text
-from softenv.baselines.agents import ALGOS, hyperparams, load_agent, train_agent, training_fingerprint
+from softenv.baselines.agents import ALGOS, hyperparams, load_agent, recorded_train_seconds, train_agent, training_fingerprint
 from softenv.baselines.evaluate import SCENES, evaluate, scene_kwargs
 from softenv.bench import rerun_single_threaded
 from softenv.bench.timing import code_revision
@@ -61,8 +61,7 @@ def trained_error(args: argparse.Namespace, overrides: dict[str, float], number:
     model = train_agent(args.algo, args.scene, seed, run_dir, args.timesteps, progress=False, overrides=overrides)
     played = evaluate(load_agent(model, args.scene), args.scene, args.episodes, list(range(args.episodes)),
                       task={"split": "train"})
-    seconds = json.loads((run_dir / "agent.json").read_text()).get("train_seconds")
-    return float(played.values["error_sum_mm"].mean()), seconds
+    return float(played.values["error_sum_mm"].mean()), recorded_train_seconds(run_dir)
 
 
 def objective(trial: optuna.Trial, args: argparse.Namespace) -> float:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from softenv.baselines.agents import (AGENT_FORMAT_VERSION, ALGOS, _literal_dict, dynamics_digest, hyperparams, load_agent,
-                                      train_agent)
+                                      recorded_train_seconds, train_agent)
 from softenv.baselines.benchmark import (ERROR_FLOOR_MM, Plan, _error_plot, _gallery, agent_colours, format_seeds,
                                         run, seed_label)
 from softenv.baselines.curves import learning_curve
@@ -478,6 +478,8 @@ def test_the_report_carries_every_episode_and_the_learning_curves(tmp_path):
     [row] = report["convergence"]                        # one seed: the rule has no interval to apply
     assert row["agent"] == "sac" and row["seeds"] == 1 and row["converged"] is None
     assert row["final"] == pytest.approx(returns[-1]) and row["equal_steps"] == int(steps[-1])
+    # the training's time as its run recorded it, not the job's (a job that re-reads the run takes ~1 s)
+    assert row["train_s_per_seed"] == recorded_train_seconds(tmp_path / "runs" / "SoftSphere-v0" / "sac-0") > 0
     assert "| SoftSphere-v0 | sac | 1 |" in md and "- (one seed, or under 2 evaluations in the last half)" in md
 
 

@@ -4,6 +4,7 @@ against sums done by hand on made-up curves."""
 import numpy as np
 import pytest
 
+from softenv.baselines import curves
 from softenv.baselines.curves import at_equal_steps, convergence, convergence_report, value_at
 from softenv.stats import bootstrap_ci
 
@@ -66,10 +67,26 @@ def test_agents_are_read_at_the_smallest_budget():
     with pytest.raises(ValueError, match="at least one curve"):
         at_equal_steps({"ppo": ppo, "sac": []})
 
-    table, rows = convergence_report({("S", "ppo"): ppo, ("S", "sac"): sac}, {("S", "ppo"): [30.0, 50.0]})
-    assert [r["agent"] for r in rows] == ["ppo", "sac"] and rows[0]["wall_s_per_seed"] == 40.0
-    assert np.isnan(rows[1]["wall_s_per_seed"]) and rows[0]["equal_steps"] == 4000
+    table, rows = convergence_report({("S", "ppo"): ppo, ("S", "sac"): sac}, {("S", "ppo"): [30.0, None]})
+    assert [r["agent"] for r in rows] == ["ppo", "sac"] and rows[0]["train_s_per_seed"] == 30.0
+    assert rows[0]["train_s_recorded"] == 1 and rows[1]["train_s_recorded"] == 0
+    assert np.isnan(rows[1]["train_s_per_seed"]) and rows[0]["equal_steps"] == 4000
     assert "| S | ppo | 2 | 10,000 |" in table and "41.0" in table
+    # the minutes column: the mean of the seeds that recorded theirs, and how many did
+    assert "| 0.5 (1 of 2 seeds) |" in table and table.endswith("at 4,000 | - |")
+    both = convergence_report({("S", "ppo"): ppo}, {("S", "ppo"): [30.0, 90.0]})[0]
+    assert both.endswith("at 10,000 | 1.0 |")
+
+
+def test_the_rule_is_written_from_its_constants(monkeypatch):
+    """The rule's words follow its numbers: one place says them (the table's headers too)."""
+    assert (curves.TREND, curves.AHEAD, curves.TOLERANCE) == (0.5, 0.2, 0.05)
+    assert "last 50 % of the budget" in curves.RULE and "further 20 %" in curves.RULE
+    assert "less than 5 %" in curves.RULE and "above 5 %" in curves.RISING
+    monkeypatch.setattr(curves, "TOLERANCE", 0.1)
+    monkeypatch.setattr(curves, "AHEAD", 0.25)
+    table = curves.convergence_report({("S", "ppo"): [(STEPS, STEPS / 100)] * 2}, {})[0]
+    assert "gain a further 25 % would add" in table and "tolerance (10 % of the gain so far)" in table
 
 
 def test_the_learning_curves_name_the_agents_still_rising():
@@ -85,5 +102,5 @@ def test_the_learning_curves_name_the_agents_still_rising():
     plan = Plan(["SoftSphere-v0"], [], ["ppo", "sac"], {"SoftSphere-v0": 3}, {"ppo": 10_000, "sac": 10_000})
     fig = _learning_curves(plan, {("SoftSphere-v0", "ppo"): rising, ("SoftSphere-v0", "sac"): flat}, "test", plt)
     texts = [t.get_text() for t in fig.axes[0].texts]
-    assert any(t.endswith("still rising (rule in the report): ppo") for t in texts)
+    assert any(t.endswith("not converged (rule in the report): ppo") for t in texts)
     plt.close(fig)

@@ -94,7 +94,10 @@ def test_shac_learns_reproducibly_and_saves_what_it_learned(tmp_path):
 
     path = tmp_path / "shac.pt"
     shac.save(agent, args, path)
-    loaded = shac.load(path, args)
+    assert shac.train_seconds(path) is None                 # saved without the record
+    shac.save(agent, args, path, train_seconds=12.5)
+    loaded = shac.load(path, args)                          # the record is not a setting
+    assert shac.train_seconds(path) == 12.5
     obs = torch.randn(5, len(agent.norm.mean))
     assert torch.equal(loaded.deterministic(obs), agent.deterministic(obs))
     with pytest.raises(ValueError, match="was trained with"):
@@ -121,4 +124,6 @@ def test_compare_trains_shac_on_request_with_its_learning_curve(tmp_path):
     cell = next(s for s in report["summaries"] if s["policy"] == "shac")
     assert cell["kind"] == "agent (1,024 steps, first-order)" and np.array(cell["episode_scores"]).shape == (1, 3)
     assert report["learning_curves"]["SoftSphere-v0 shac"][0]["env_steps"] == [512, 1024]   # one a window here
-    assert (tmp_path / "runs" / "SoftSphere-v0" / "shac-0" / "shac.pt").exists()
+    saved = tmp_path / "runs" / "SoftSphere-v0" / "shac-0" / "shac.pt"
+    [row] = report["convergence"]
+    assert row["train_s_per_seed"] == shac.train_seconds(saved) > 0 and row["train_s_recorded"] == 1
