@@ -92,7 +92,7 @@ def main() -> None:
             searched = oracle.plan(make_baseline("expert", world), len(seeds), seeds)
             row["oracle_s_per_episode"] = (time.perf_counter() - t0) / len(seeds)
             row["oracle_rerun_rel_diff"] = float(np.max(np.abs(searched - anchors.oracle) / anchors.oracle))
-            ax.plot(oracle.elapsed, oracle.history, "s-", ms=3, label="planning oracle (CEM, 16 x 30)")
+            ax.plot(oracle.elapsed, oracle.history, "s-", ms=3, label=f"planning oracle (CEM v{TrajectoryOracle.VERSION})")
         else:
             t0 = time.perf_counter()
             exact = evaluate(PlanningOracle(world), scene, len(seeds), seeds).values["error_sum_mm"]

@@ -3,8 +3,8 @@ force (the score's 0) and under the planning oracle (its 100), into ``softenv/ba
 (package data; the format is :mod:`softenv.baselines.anchors`'). Run it from a clean commit: each file
 names the commit and this command. It runs with one BLAS thread and an empty cache of its own, as the
 tests and ``softenv compare`` do (a scene's shape model built with other BLAS threads differs in the last
-bits). About 5 minutes on 2 cores, nearly all of it the laryngoscope oracle's search (16 candidates x
-30 iterations per episode).
+bits). Nearly all of its time is the laryngoscope oracle's search (16 candidates x 120 iterations from
+each of three starts, per episode): about an hour on 2 cores (``docs/results.md`` has the measured figure).
 
     python scripts/make_anchors.py [--scenes SCENE ...] [--episodes 100] [--jobs 2]
 """

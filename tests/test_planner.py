@@ -38,7 +38,7 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     """Elitist CEM: never worse than the expert on any episode, better on average; the plan it returns
     is what the evaluation then measures; and the same seed gives the same plan bit for bit."""
     warm = evaluate(expert, SCENE, episodes=3).values["error_sum_mm"]
-    oracle = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
+    oracle = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2, restarts=1, from_rest=False)
     planned = oracle.plan(expert, episodes=3)
     assert np.all(planned <= warm * (1 + 1e-9)) and planned.mean() < 0.97 * warm.mean()
     assert oracle.history[0] == pytest.approx(warm.mean()) and np.all(np.diff(oracle.history) <= 1e-9)
@@ -51,9 +51,32 @@ def test_the_oracle_improves_on_its_warm_start_and_replays_its_plan(expert):
     measured = evaluate(oracle, SCENE, episodes=3)
     np.testing.assert_allclose(measured.values["error_sum_mm"], planned, rtol=1e-9)
     assert measured.decision_us == oracle.decision_us > 0       # the planner's own figure is carried, not re-timed
-    again = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2)
+    again = TrajectoryOracle(SCENE, candidates=6, iterations=4, elites=2, restarts=1, from_rest=False)
     again.plan(expert, episodes=3)
     np.testing.assert_array_equal(again.actions, oracle.actions)
+
+
+def test_the_oracle_keeps_each_episodes_best_start(expert):
+    """Two restarts from the expert and one from rest, side by side: each start's search is the one it
+    would run alone (its own generators: the first is the single search above bit for bit), the rest
+    start begins at the no-force error, each episode keeps its best start's plan, and that plan replays
+    to its error."""
+    settings = {"candidates": 6, "iterations": 3, "elites": 2}
+    oracle = TrajectoryOracle(SCENE, **settings)                   # restarts=2, from_rest=True
+    planned = oracle.plan(expert, episodes=2)
+    assert oracle.history_by_start.shape == (3, 4, 2)
+    alone = TrajectoryOracle(SCENE, **settings, restarts=1, from_rest=False)
+    alone.plan(expert, episodes=2)
+    np.testing.assert_array_equal(oracle.history_by_start[0], alone.history_by_episode)
+    other = TrajectoryOracle(SCENE, **settings, seed=1, restarts=1, from_rest=False)
+    other.plan(expert, episodes=2)
+    np.testing.assert_array_equal(oracle.history_by_start[1], other.history_by_episode)
+    rest = evaluate(ReplayPolicy(np.zeros((2, 250, 4))), SCENE, episodes=2).values["error_sum_mm"]
+    np.testing.assert_array_equal(oracle.history_by_start[2, 0], rest)
+    np.testing.assert_array_equal(oracle.history_by_episode, oracle.history_by_start.min(axis=0))
+    np.testing.assert_array_equal(planned, oracle.history_by_start[:, -1].min(axis=0))
+    assert np.all(planned <= alone.history_by_episode[-1])
+    np.testing.assert_allclose(evaluate(oracle, SCENE, episodes=2).values["error_sum_mm"], planned, rtol=1e-9)
 
 
 def test_the_oracle_plans_the_targets_its_scene_overrides_name(expert):
@@ -84,7 +107,9 @@ def test_evaluate_sums_each_episodes_reward(expert):
 def test_the_oracle_refuses_bad_settings():
     for kwargs, match in (({"candidates": 1}, "candidates=1"), ({"elites": 16}, "elites=16 must be below candidates=16"),
                           ({"sigma": float("nan")}, "sigma=nan"), ({"knot_every": 0}, "knot_every=0"),
-                          ({"iterations": 2.5}, "iterations=2.5")):
+                          ({"iterations": 2.5}, "iterations=2.5"), ({"restarts": -1}, "restarts=-1"),
+                          ({"from_rest": 1}, "from_rest=1: must be True or False"),
+                          ({"restarts": 0, "from_rest": False}, "leaves no search")):
         with pytest.raises(ValueError, match=match):
             TrajectoryOracle(SCENE, **kwargs)
 
