@@ -109,6 +109,44 @@ def degrees_to_features(commands: Any, radius: float) -> np.ndarray:
     return out
 
 
+DEPTH_STEP = 1e-4      # the central difference's relative step in the stiffening depth (the tissue is smooth in it)
+
+
+def depth_sensitivity(scene: Scene) -> TabulatedResponse:
+    """The response's derivative in a factor ``q`` on the stiffening law's depth (the depth ``q`` times the
+    tissue's), at ``q = 1``, on the response table's grid: central differences of the analytic tissue at
+    ``q = 1 +- DEPTH_STEP``, each tabulated and projected on the scene's shape model (cached). The torch
+    twin's ``stiffening_depth`` takes the response to first order in ``q`` from it. An analytic tongue on the
+    stiffening law only: the linear law has no depth, and the FE tongue's law is neo-Hookean."""
+    t = scene.tissue
+    if scene.fe is not None or t.law != "stiffening" or not isinstance(scene.response, TabulatedResponse):
+        raise ValueError(f"the stiffening depth is a parameter of the analytic tongue's stiffening law with the "
+                         f"tabulated response; this scene has tissue.model={scene.config['tissue']['model']!r}, "
+                         f"law={t.law!r}, response.model={scene.config['response']['model']!r}")
+    table = scene.response
+    nodes = table.nodes
+
+    def at(q: float) -> TabulatedResponse:
+        tissue = AnalyticTissue(scene.mesh, replace(t, stiffening_depth=t.stiffening_depth * q))
+        return tabulate(ExactResponse(tissue, scene.layout, scene.shape_model), scene.workspace, nodes)
+
+    def build() -> TabulatedResponse:
+        values = (at(1 + DEPTH_STEP).values_ - at(1 - DEPTH_STEP).values_) / (2 * DEPTH_STEP)
+        out = TabulatedResponse(table.low_, table.high_, values)
+        out.shape_model_fingerprint_ = scene.shape_model.fingerprint()
+        return out
+
+    made_of = {"tissue": t.to_dict(), "mesh": scene.mesh.spec(), "low": table.low_.tolist(), "high": table.high_.tolist(),
+               "nodes": list(nodes), "shape_model": scene.shape_model.fingerprint(), "step": DEPTH_STEP}
+    def load(path: Any) -> TabulatedResponse:
+        loaded = TabulatedResponse.load(path, shape_model=scene.shape_model)
+        if not isinstance(loaded, TabulatedResponse):
+            raise ValueError(f"{path}: holds a {loaded.kind} response, not a table")
+        return loaded
+
+    return _cache.cached("depth-sensitivity", made_of, build, load, lambda m, path: m.save(path))
+
+
 def device_workspace(config: SceneConfig) -> Workspace:
     """The device's box in force-feature units, from the config's degrees and newtons."""
     dev, R = config["device"], config["tissue"]["radius"]

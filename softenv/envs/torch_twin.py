@@ -47,6 +47,7 @@ from .batching import autoreset_mode as autoreset_mode_of
 from .batching import disabled_step_check, episode_limit, reset_mask_option
 from .checks import check_actions
 from .config import scene_config
+from .scene import depth_sensitivity
 from .task import action_change, normalized_score, reward_terms
 from .torch_graph import GraphedStep
 from .._torch_ops import TorchOps
@@ -158,6 +159,8 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             self._device.differentiable()
         self._stiffness: torch.Tensor | None = None        # scene parameters held as leaves (track_params)
         self._target_shift: torch.Tensor | None = None
+        self._depth: torch.Tensor | None = None
+        self._depth_flat: torch.Tensor | None = None        # the response's sensitivity to the depth, as _flat
         self._high = t(table.high_)
         self._episodes = (HostEpisodes(world, n, t) if target_draw == "host"
                           else DeviceEpisodes(world, n, t, self._response))
@@ -287,9 +290,16 @@ class SoftSphereTorchVectorEnv(VectorEnv):
           shapes they are.
         * ``coupling_stiffness``, ``coupling_damping`` ``(n,)`` (laryngoscope): the hand-blade coupling's
           translational stiffness and damping over the scene's.
+        * ``rotational_stiffness``, ``rotational_damping`` ``(n,)`` (laryngoscope): the wrist's rotary
+          spring and damper over the scene's (the damper's velocity coefficient follows, as Chipmunk's).
         * ``target_shift`` ``(n, k)``: added to every step's target shape parameters: the reward, its
           reference distance and the observation follow the shifted target; the normalized score's anchors
           stay the drawn target's.
+        * ``stiffening_depth`` ``(n,)`` (the analytic tongue's stiffening law, ideal device): the law's depth
+          over the scene's. The response is taken to first order in it, ``b(F) + (q - 1) db/dq(F)``, from a
+          table of ``db/dq`` by central differences of the analytic tissue
+          (:func:`~softenv.envs.scene.depth_sensitivity`, built on first use): its gradient is the tissue's at
+          the scene's depth; away from it the response is that linear model's (its bias: docs/gradients.md).
 
         They stay across ``reset()`` and ``detach()`` (they are not state); a later ``backward()`` leaves
         each one's gradient in its ``.grad``, and moving one in place under ``torch.no_grad()`` moves the
@@ -307,15 +317,25 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             start = torch.zeros if name == "target_shift" else torch.ones
             out[name] = start(shape, dtype=self.dtype, device=self.torch_device).requires_grad_(True)
         self._stiffness, self._target_shift = out.get("tissue_stiffness"), out.get("target_shift")
-        carried = self.scene_params()[1:]
+        self._depth = out.get("stiffening_depth")
+        if self._depth is not None and self._depth_flat is None:
+            sensitivity = depth_sensitivity(self.world.scene)
+            self._depth_flat = self._tensor(sensitivity.grid().flat)
+        carried = getattr(self._device, "scene_params", ())
         if carried:
             self._device.use_params({k: v for k, v in out.items() if k in carried})
         return out
 
     def scene_params(self) -> tuple[str, ...]:
-        """The scene parameters :meth:`track_params` offers here: the target's shift, and those the device's
-        step carries (``DeviceTensors.scene_params``; none for a kind written before the contract had it)."""
-        return ("target_shift", *getattr(self._device, "scene_params", ()))
+        """The scene parameters :meth:`track_params` offers here: the target's shift, those the device's
+        step carries (``DeviceTensors.scene_params``; none for a kind written before the contract had it),
+        and the stiffening law's depth where the ideal device presses an analytic tongue on that law (on the
+        laryngoscope the depth would also move the tongue's contact law in its kernel, which has no
+        sensitivity to it)."""
+        scene = self.world.scene
+        law = (("stiffening_depth",) if self.world.device_kind.name == "ideal" and scene.fe is None
+               and scene.tissue.law == "stiffening" else ())
+        return ("target_shift", *getattr(self._device, "scene_params", ()), *law)
 
     def _stiffened(self, f: torch.Tensor) -> torch.Tensor:
         """The force features at which a tongue ``tissue_stiffness`` times as stiff responds as the scene's."""
@@ -376,13 +396,15 @@ class SoftSphereTorchVectorEnv(VectorEnv):
             w = w * g[:, j, self._bits[:, j]]
         return g, w, torch.sum(cell.to(torch.int64) * self._strides, dim=-1)
 
-    def _interpolate(self, x: torch.Tensor) -> torch.Tensor:
+    def _interpolate(self, x: torch.Tensor, flat: torch.Tensor | None = None) -> torch.Tensor:
+        """``x``'s multilinear interpolation in the response table (``flat``: another table on its grid)."""
+        rows = self._flat if flat is None else flat
         _, w, base = self._corners(x)
         # corner by corner, not a gather of rows and a bmm: compiled, one elementwise kernel reading the
         # table's rows where they lie (docs/performance.md: measured choices)
-        out = w[:, :1] * self._flat[base + self._offsets[0]]
+        out = w[:, :1] * rows[base + self._offsets[0]]
         for c in range(1, len(self._offsets)):
-            out = out + w[:, c:c + 1] * self._flat[base + self._offsets[c]]
+            out = out + w[:, c:c + 1] * rows[base + self._offsets[c]]
         return out
 
     def _advance(self, a: torch.Tensor, stepped: torch.Tensor) -> tuple[Any, torch.Tensor, torch.Tensor, torch.Tensor,
@@ -391,7 +413,14 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         w = self.world
         target, sq_ref, zero, oracle = self._episodes.references(self._t, stepped)
         f, normal, sideways = self._device.act(a, stepped)
-        g = self._response(f if self._stiffness is None else self._stiffened(f))
+        x = f if self._stiffness is None else self._stiffened(f)
+        g = self._response(x)
+        if self._depth is not None:                  # first order in the depth's factor (track_params)
+            assert self._depth_flat is not None
+            if not bool((self._depth > 0).all()):
+                i = int((~(self._depth > 0)).nonzero()[0, 0])
+                raise ValueError(f"stiffening_depth[{i}] = {float(self._depth[i].detach())!r}: a depth factor must be > 0")
+            g = g + (self._depth - 1.0)[:, None] * self._interpolate(x, self._depth_flat)
         if self._target_shift is not None:
             target, sq_ref = self._shifted_references(target, sq_ref)
         z = self._z.clone() if w.dynamics.stateful else self._z     # step advances the creep state in place

@@ -10,6 +10,7 @@ import torch
 
 from ..base import Config, DeviceScene
 from . import BATCH_ENGINES, LARYNGOSCOPE_OBS
+from .params import SCENE_COLUMNS
 from .part import INFO_KEYS, batch_report, in_workspace, laryngoscope_parts
 from .state import DeviceState
 from .tensors import LaryngoscopeTensors
@@ -49,8 +50,7 @@ class LaryngoscopeTensorPart:
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
     episode_info_keys: tuple[str, ...] = ()
-    # the scene parameters its kernel reads (warp_kernel.scene_row), in the columns of the engine's scene_params
-    scene_params: tuple[str, ...] = ("coupling_stiffness", "coupling_damping", "tissue_stiffness")
+    scene_params: tuple[str, ...] = SCENE_COLUMNS      # what its kernel reads per device (warp_kernel.scene_row)
 
     def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
                  dtype: torch.dtype) -> None:
@@ -116,7 +116,8 @@ class LaryngoscopeTensorPart:
         return self.laryngoscopes.track_state()
 
     def use_params(self, params: dict[str, torch.Tensor]) -> None:
-        """The coupling's stiffness and damping and the tongue's stiffness (its load table and lateral grip)
-        as factors on the kernel's scene parameters (the Warp engine's, which :meth:`differentiable` sets)."""
+        """The coupling's stiffness and damping, the tongue's stiffness (its load table and lateral grip) and
+        the wrist's rotary stiffness and damping as factors on the kernel's scene parameters (the Warp
+        engine's, which :meth:`differentiable` sets)."""
         self._scene_defaults = self.laryngoscopes.scene_params.detach().clone()
         self._factors = {name: x for name, x in params.items() if name in self.scene_params}

@@ -31,7 +31,7 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
     _STATE = ("_blade", "_hand", "_lateral", "_contact", "_incisor", "_hand_v")     # what a step reads from the last
     has_adjoint = False         # an engine whose control step torch autograd can follow (Warp's) sets it
     taped = False               # set by the torch twin's differentiable=True: control steps carry the graph
-    scene_params: torch.Tensor  # (n, 3) scene parameters of an engine whose kernel reads them (Warp's: scene_row)
+    scene_params: torch.Tensor  # (n, 5) params.SCENE_COLUMNS of an engine whose kernel reads them (Warp's)
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:

@@ -4,14 +4,13 @@ equal to a single pymunk device bit for bit; and the kernel's constants as every
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 import warp as wp
 
 from ..contact import TongueContact
-from .params import LaryngoscopeParams
+from .params import SCENE_COLUMNS, LaryngoscopeParams
 from .physics import Constants
 from .state import IncisorContact, KernelLaryngoscopes
 from .warp_kernel import MAX_VERTICES, Params, control_period, f64
@@ -21,7 +20,7 @@ def params_of(c: Constants, s: IncisorContact) -> Params:
     """The kernel's constants from the substep's (:class:`~.physics.Constants`) and the contact's."""
     p = Params()
     for name in ("R", "h", "inv_m", "inv_I", "h_over_m", "k", "c", "k_t", "mu", "k_ref", "damping", "step",
-                 "inv_step", "k_rot", "c_rot"):
+                 "inv_step"):
         setattr(p, name, f64(getattr(c, name)))
     p.top = int(c.top)
     p.grip = wp.vec2d(*c.grip)
@@ -37,7 +36,6 @@ def params_of(c: Constants, s: IncisorContact) -> Params:
     p.slop = f64(s.slop)
     p.bias_coef = f64(s.bias_coef)
     p.dt_coef = f64(s.dt_coef)
-    p.w_coef = f64(1.0 - math.exp(-c.c_rot * c.h * c.inv_I))
     if len(s.local) > MAX_VERTICES:
         raise ValueError(f"the blade's outline has {len(s.local)} vertices; the Warp kernel holds at most {MAX_VERTICES}")
     p.vertices = len(s.local)
@@ -53,9 +51,11 @@ def device_params(c: Constants, s: IncisorContact, params: LaryngoscopeParams) -
 
 
 def scene_defaults(params: LaryngoscopeParams, n: int) -> np.ndarray:
-    """The scene parameters ``(n, 3)`` each device's launch reads (:func:`.warp_kernel.scene_row`) as the
-    scene sets them: the coupling's stiffness and damping, and the tongue's stiffness factor 1."""
-    return np.tile([params.coupling_stiffness, params.coupling_damping, 1.0], (n, 1)).astype(np.float64)
+    """The scene parameters ``(n, 5)`` each device's launch reads (:func:`.warp_kernel.scene_row`,
+    :data:`~.params.SCENE_COLUMNS`) as the scene sets them: the coupling's stiffness and damping, the
+    tongue's stiffness factor 1, the wrist's rotary stiffness and damping."""
+    row = [1.0 if name == "tissue_stiffness" else getattr(params, name) for name in SCENE_COLUMNS]
+    return np.tile(row, (n, 1)).astype(np.float64)
 
 
 def kernel_constants(dev: KernelLaryngoscopes, device: Any) -> list[Any]:

@@ -31,7 +31,7 @@ import math
 
 import warp as wp
 
-from .params import SPRING_LENGTH
+from .params import SCENE_COLUMNS, SPRING_LENGTH
 from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY
 
 wp.config.log_level = wp.LOG_WARNING      # Warp greets and reports every module it loads otherwise
@@ -66,8 +66,6 @@ class Params:
     step: f64
     inv_step: f64
     top: int
-    k_rot: f64
-    c_rot: f64
     grip: wp.vec2d
     heel: wp.vec2d
     tip: wp.vec2d
@@ -81,11 +79,14 @@ class Params:
     slop: f64
     bias_coef: f64
     dt_coef: f64
-    w_coef: f64          # the wrist damper's velocity coefficient, 1 - exp(-c_rot h / I)
     vertices: int        # the blade polygon's vertex count
     max_hand_speed: f64  # the hand's speeds at |action| = 1 (m/s, rad/s)
     max_pitch_rate: f64
     max_sweep_speed: f64
+
+
+# a device's scene parameters (params.SCENE_COLUMNS, :func:`scene_row`), then the wrist damper's coefficient
+Tune = wp.types.vector(length=len(SCENE_COLUMNS) + 1, dtype=f64)
 
 
 @wp.struct
@@ -496,14 +497,15 @@ def action_of(actions: wp.array2d(dtype=f64), i: int) -> wp.vec4d:
 
 
 @wp.func
-def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.array(dtype=f64),
+def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array(dtype=f64),
             slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
     """One substep of one device: the hand's clipped velocity, the tongue's force, then Chipmunk's step of
     the coupled blade against the incisors (``cpSpaceStep``). ``tune`` is the device's row of the scene
-    parameters (:func:`scene_row`): the coupling's stiffness and damping, and the factor on the tongue's
-    stiffness (its load table and lateral grip)."""
+    parameters (:func:`scene_row`): the coupling's stiffness and damping, the factor on the tongue's
+    stiffness (its load table and lateral grip), and the wrist's rotary stiffness and damping."""
     h = p.h
     k_c, c_c, s_t = tune[0], tune[1], tune[2]
+    k_rot, c_rot, w_coef = tune[3], tune[4], tune[5]
     m_inv, i_inv = p.inv_m, p.inv_I
     px, py, a, ca, sa, vx, vy, w = f64(d.px), f64(d.py), f64(d.a), f64(d.ca), f64(d.sa), f64(d.vx), f64(d.vy), f64(d.w)
     gx, gy, pitch = f64(d.gx), f64(d.gy), f64(d.pitch)
@@ -544,7 +546,7 @@ def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.a
         qx, qy = ca * p.grip[0] - sa * p.grip[1], sa * p.grip[0] + ca * p.grip[1]
         Fx = k_c * (gx - px - qx) + c_c * (hvx - vx + w * qy)
         Fy = k_c * (gy - py - qy) + c_c * (hvy - vy - w * qx)
-        tau = qx * Fy - qy * Fx + p.k_rot * (pitch - a) + p.c_rot * (hw - w)
+        tau = qx * Fy - qy * Fx + k_rot * (pitch - a) + c_rot * (hw - w)
         push = -(Fx * nx + Fy * ny) * p.inv_m - tau * rn * p.inv_I
         beta = stiff * h * inv_meff
         P = max0((law + (p.damping + stiff) * approach + stiff * h * push) / (ONE + beta))
@@ -641,7 +643,7 @@ def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.a
         spring_mass = put(spring_mass, s, ONE / kk)
         spring_coef = put(spring_coef, s, ONE - wp.exp(-c_c * h * kk))
         spring_j = put(spring_j, s, j)
-    j_rot = ((pitch - a) - ZERO) * p.k_rot * h
+    j_rot = ((pitch - a) - ZERO) * k_rot * h
     w = w + j_rot * i_inv
     target_wrn = f64(0.0)
     # 3. velocities
@@ -697,7 +699,7 @@ def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.a
             vx, vy = vx + nx * j * m_inv, vy + ny * j * m_inv
             w = w + i_inv * (gqx * (ny * j) - gqy * (nx * j))
         wrn = hw - w
-        w_damp = (target_wrn - wrn) * p.w_coef
+        w_damp = (target_wrn - wrn) * w_coef
         target_wrn = wrn + w_damp
         j = j_rot - (j_rot - w_damp * i_sum)
         j_rot = j_rot - j
@@ -749,10 +751,13 @@ def substep(d: Device, p: Params, tune: wp.vec3d, command: wp.vec4d, loads: wp.a
 
 
 @wp.func
-def scene_row(scene: wp.array2d(dtype=f64), i: int) -> wp.vec3d:
-    """Device ``i``'s scene parameters: the coupling's stiffness (N/m) and damping (N s/m), and the factor on
-    the tongue's stiffness (1: the scene's)."""
-    return wp.vec3d(scene[i, 0], scene[i, 1], scene[i, 2])
+def scene_row(scene: wp.array2d(dtype=f64), i: int, p: Params) -> Tune:
+    """Device ``i``'s scene parameters (:data:`~.params.SCENE_COLUMNS`): the coupling's stiffness (N/m) and damping
+    (N s/m), the factor on the tongue's stiffness (1: the scene's), the wrist's rotary stiffness (N m/rad)
+    and damping (N m s/rad); then the wrist damper's velocity coefficient, 1 - exp(-c_rot h / I), as
+    Chipmunk's damped rotary spring computes it (the same roundings: it equals pymunk bit for bit)."""
+    c_rot = scene[i, 4]
+    return Tune(scene[i, 0], scene[i, 1], scene[i, 2], scene[i, 3], c_rot, ONE - wp.exp(-c_rot * p.h * p.inv_I))
 
 
 @wp.func
@@ -822,7 +827,7 @@ def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), la
     i = wp.tid()
     d = start(blade, hand, lateral, i)
     order = hand_command(action_of(actions, i), d.pitch, p)
-    tune = scene_row(scene, i)
+    tune = scene_row(scene, i, p)
     for _ in range(count):
         d = substep(d, p, tune, order, loads, slopes, local, local_normals)
     finish(d, count, p, blade, hand, lateral, hand_v, contact, incisor, i)
@@ -856,4 +861,4 @@ def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d
     """One substep of device ``i`` from ``before`` into ``after``: a launch a substep, so that a
     :class:`warp.Tape` keeps every intermediate state for the adjoint."""
     i = wp.tid()
-    after[i] = substep(before[i], p, scene_row(scene, i), command[i], loads, slopes, local, local_normals)
+    after[i] = substep(before[i], p, scene_row(scene, i, p), command[i], loads, slopes, local, local_normals)

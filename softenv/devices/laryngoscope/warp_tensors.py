@@ -30,7 +30,7 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
         super().__init__(params, contact, n, torch_device)
         self._warp_device = wp.device_from_torch(self.torch_device)
         self._constants = kernel_constants(self, self._warp_device)
-        self.scene_params = self._array(scene_defaults(params, n))     # (n, 3): scene_row's; a taped step may track it
+        self.scene_params = self._array(scene_defaults(params, n))     # (n, 5): scene_row's; a taped step may track it
 
     def control_step(self, actions: Any, moving: Any = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
@@ -118,7 +118,7 @@ def differentiable_rollout(engine: LaryngoscopeWarpTensors, blade: torch.Tensor,
     ``lateral`` ``(n, 4)`` (as :class:`~.state.DeviceState` holds them), with ``actions`` ``(T, n, 4)``
     (normalised, as :meth:`control_step` takes them), as torch autograd sees it: each period's state
     ``(T, n, ...)`` by :data:`ROLLOUT_FIELDS` name, whose gradients reach the start state and the actions
-    through Warp's adjoint of every substep, and to ``scene`` ``(n, 3)`` (the scene parameters of
+    through Warp's adjoint of every substep, and to ``scene`` ``(n, 5)`` (the scene parameters of
     :func:`~.warp_kernel.scene_row`; None: the engine's). It leaves
     ``engine``'s own state as it was. Through the incisors' contact and the clamps (workspace, friction
     cone, the tongue's load table) the gradient is that of the branch each substep took."""
