@@ -6,8 +6,10 @@ by name."""
 import numpy as np
 import pytest
 
-from softenv.training.hand import haptic_config
-from softenv.training.identify import identify, log_actions, simulate_sessions
+from softenv.envs.config import scene_material
+from softenv.training.hand import haptic_config, reach_env, relative_hand_pose, sensor_readings
+from softenv.training.identify import identify, identify_log, log_actions, simulate_sessions
+from softenv.training.logs import HAND_LOG, SENSOR_COLUMNS, read_readings, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
 TRUTH = {"tissue_stiffness": np.array([1.25, 0.85]), "coupling_stiffness": np.array([0.85, 1.2])}
@@ -59,3 +61,36 @@ def test_bad_input_is_refused_by_name(sessions):
         identify(actions, good, [0.3], config, names=("tongue",), channels=("tongue_force_N",))
     with pytest.raises(ValueError, match="iterations"):
         identify(actions, good, [0.3], config, channels=("tongue_force_N",), iterations=0)
+
+
+def test_a_log_with_sensor_columns_is_identified_end_to_end(tmp_path):
+    """A session recorded on the numpy twin of a tongue 1.25 times as stiff (the scene's tissue.E), poses and
+    sensor readings written a control period a row as ``softenv play`` writes them, is fitted on the torch
+    twin of the scene the log names (the normal tongue): the factor comes back."""
+    base = haptic_config(None)
+    stiff = haptic_config({"tissue": {"E": 1.25 * scene_material(base)[0]}})
+    actions = log_actions(expert_hand_log(base, duration_s=1.2), stiff)
+    env = reach_env(stiff, len(actions))
+    env.reset(seed=0)
+    poses, readings = [relative_hand_pose(env)], [sensor_readings(env)]
+    for a in actions:
+        env.step(a)
+        poses.append(relative_hand_pose(env))
+        readings.append(sensor_readings(env))
+    dt = base["dynamics"]["dt"]
+    path = tmp_path / "session.csv"
+    save_log(np.column_stack([np.arange(len(poses)) * dt, poses]), path, HAND_LOG,
+             readings={c: np.array([r[c] for r in readings]) for c in SENSOR_COLUMNS})
+    assert max(r["tongue_force_N"] for r in readings) > 5.0                # the blade pressed the tongue
+    np.testing.assert_allclose(read_readings(path)["blade_z_mm"], [r["blade_z_mm"] for r in readings], rtol=1e-8)
+    fit = identify_log(path, NOISE, names=("tissue_stiffness",), iterations=60, newton=1)
+    assert abs(fit.values["tissue_stiffness"][0] / 1.25 - 1.0) < 0.02, fit.values
+    with pytest.raises(ValueError, match="give the standard deviation of every channel the log carries"):
+        identify_log(path, {"tongue_force_N": 0.3})
+    save_log(np.column_stack([np.arange(len(poses)) * dt, poses]), tmp_path / "bare.csv", HAND_LOG)
+    assert read_readings(tmp_path / "bare.csv") == {}
+    with pytest.raises(ValueError, match="carries no sensor readings"):
+        identify_log(tmp_path / "bare.csv", NOISE)
+    with pytest.raises(ValueError, match="row 1, column 'tongue_force_N' = -1.0: a force must be finite and >= 0"):
+        save_log(np.column_stack([np.arange(len(poses)) * dt, poses]), tmp_path / "bad.csv", HAND_LOG,
+                 readings={"tongue_force_N": np.r_[-1.0, np.zeros(len(poses) - 1)]})

@@ -9,7 +9,7 @@ import pytest
 
 from softenv.training import play
 from softenv.training.inputs import CONTROLS, DEAD_ZONE, FINE, RAMP_FLOOR, RAMP_S, PygameInput
-from softenv.training.logs import read_log
+from softenv.training.logs import SENSOR_COLUMNS, read_log, read_readings
 from softenv.training.scoring import score_file
 from softenv.training.play_view import DANGER, HAND, INK, PANEL, SCALE_BAR_MM, SOLID, TARGET
 
@@ -48,8 +48,13 @@ def test_a_scripted_session_writes_a_log_that_scores_like_the_session(tmp_path):
     assert table[8, 1] == pytest.approx(-_ramp_distance(8), rel=1e-9)
     assert table[24, 2] < table[8, 2]                                        # then lifted (pressed)
     assert table[-1, 4] > 0.0                                                # swept right
+    # the device's sensors, a reading a row: the tongue's force (its peak the report's) and the blade's height
+    readings = read_readings(logs[0])
+    assert sorted(readings) == sorted(SENSOR_COLUMNS) and readings["tongue_force_N"][0] == 0.0
     # the replay of the log is the session: same shape error and clinical metrics
     metrics = session.report["metrics"]
+    assert readings["tongue_force_N"].max() == pytest.approx(metrics["clinical"]["peak_tongue_force_N"], rel=1e-4)
+    assert np.ptp(readings["blade_z_mm"]) > 1.0                               # lifted by millimetres
     assert metrics["final_error_mm"] == pytest.approx(session.live_final_error_mm, rel=1e-5)
     for key in ("peak_tongue_force_N", "tongue_force_time_Ns", "hand_path_m", "glottic_view_pct"):
         assert metrics["clinical"][key] == pytest.approx(session.live_clinical[key], rel=1e-4, abs=1e-9), key

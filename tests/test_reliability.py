@@ -139,6 +139,11 @@ def _bad_files(tmp_path):
     both.write_text(f"{header},{hand}\n0,90,0,10,0,0,0,0,0\n1,90,0,10,0,0,0,0,0\n")
     extra = tmp_path / "extra.csv"
     extra.write_text(header + ",button\n0,90,0,10,0,1\n1,90,0,10,0,0\n")
+    hand_extra = tmp_path / "hand_extra.csv"
+    hand_extra.write_text(f"time_s,{hand},tongue_force_N,button\n0,0,0,0,0,0,1\n0.5,0,0,0,0,0,0\n")
+    bad_reading = tmp_path / "bad_reading.npz"
+    _npz(bad_reading, format_version=np.array(1), time_s=np.array([0.0, 0.5]),
+         **{c: np.zeros(2) for c in hand.split(",")}, tongue_force_N=np.array([0.0, np.nan]))
     gap = tmp_path / "gap.csv"
     gap.write_text(f"time_s,{hand}\n0,0,0,0,0\n0.5,0,0,0,0\n599.5,0,0,0,0\n")
     short_row = tmp_path / "short_row.csv"
@@ -158,6 +163,9 @@ def _bad_files(tmp_path):
     return {"column twice": (twice, r"columns \['normal_N'\] appear more than once"),
             "both schemas": (both, "has the columns of force commands and of hand poses; a log holds one schema"),
             "unknown column": (extra, r"columns \['button'\] are not force commands columns"),
+            "unknown hand column": (hand_extra, r"columns \['button'\] are not hand poses columns .* nor their "
+                                                r"optional ones \['tongue_force_N', 'blade_z_mm'\]"),
+            "NaN reading": (bad_reading, "row 2, column 'tongue_force_N' = nan: a force must be finite and >= 0"),
             "599 s gap": (gap, "row 3, column 'time_s' = 599.5: 599 s after the row before"),
             "short row": (short_row, "row 2 has 3 fields; the header has 5"),
             "1e11 elements": (claims, r"member 'time_s' declares shape \(100000000000,\)"),
@@ -170,7 +178,7 @@ def _bad_files(tmp_path):
 
 
 OVERSIZED = ("1e7 s", "1e11 elements", "zip bomb")
-AMBIGUOUS = ("column twice", "both schemas", "unknown column", "599 s gap", "short row")
+AMBIGUOUS = ("column twice", "both schemas", "unknown column", "unknown hand column", "599 s gap", "short row")
 
 
 def test_score_reports_every_bad_file_in_one_line_naming_it(tmp_path, capsys, tried):

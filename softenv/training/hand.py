@@ -60,6 +60,14 @@ def relative_hand_pose(env: Any) -> np.ndarray:
     return np.array([x - gx, z - gy, pitch, y])
 
 
+def sensor_readings(env: Any) -> dict[str, float]:
+    """What the device's sensors read now (:data:`~softenv.training.logs.SENSOR_COLUMNS`): the tongue's normal
+    force on the blade (N) and the blade's height (mm, its centre of mass in the sagittal frame)."""
+    laryngoscope = env.device.laryngoscope
+    return {"tongue_force_N": float(laryngoscope.tongue_force),
+            "blade_z_mm": float(laryngoscope.blade_pose()[0][1]) * 1e3}
+
+
 def workspace(config: SceneConfig) -> tuple[np.ndarray, np.ndarray]:
     """The hand's workspace relative to its start pose under ``config`` (low, high; x, z, pitch, y)."""
     return relative_box(LaryngoscopeParams.from_config(config))

@@ -2,7 +2,8 @@
 a recorded session by gradients through the differentiable torch twin (``docs/gradients.md``).
 
 A session is a hand-pose log (what ``softenv play`` writes and ``softenv score`` reads) and what its sensors
-read at each control period (:data:`CHANNELS`): the tongue's normal force (a blade-mounted load cell, as the
+read at each control period (:data:`CHANNELS`, the log's optional columns; :func:`identify_log` fits a log
+that carries them): the tongue's normal force (a blade-mounted load cell, as the
 manikin studies measure it) and the blade's height (a tracked marker). The hand's path does not depend on
 the tissue: :func:`log_actions` turns the log into the actions that replay it (as
 :func:`~softenv.training.scoring.replay_hand` steers), and :func:`identify` replays them on the torch twin
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,12 +31,14 @@ import torch
 from .._validation import check_array, check_int, check_real
 from ..envs.torch_twin import SoftSphereTorchVectorEnv
 from ..sections import SceneConfig
-from .hand import hand_actions, hand_config, reach_env, steer
+from .hand import hand_actions, hand_config, haptic_config, reach_env, steer
+from .logs import HAND_LOG, SENSOR_COLUMNS, read_log, read_readings, read_scene
 
 PARAMETERS = ("tissue_stiffness", "coupling_stiffness", "coupling_damping")   # each a factor on the scene's
 # what a session's sensors measure each control period, from the step's info: the tongue's normal force (a
-# blade-mounted load cell) and the blade's height (a tracked marker on its centre of mass, zeroed at its first reading)
-CHANNELS = ("tongue_force_N", "blade_z_mm")
+# blade-mounted load cell) and the blade's height (a tracked marker on its centre of mass, zeroed at its first
+# reading); a hand-pose log carries them as its optional columns
+CHANNELS = SENSOR_COLUMNS
 
 
 def log_actions(table: np.ndarray, config: SceneConfig | None = None, source: str = "log") -> np.ndarray:
@@ -45,6 +49,44 @@ def log_actions(table: np.ndarray, config: SceneConfig | None = None, source: st
     env = reach_env(config, len(poses) - 1)
     env.reset(seed=0)
     return np.array([action for action, _ in steer(env, poses)], dtype=np.float64)
+
+
+def log_readings(table: np.ndarray, readings: dict[str, np.ndarray], config: SceneConfig | None = None,
+                 source: str = "log") -> tuple[tuple[str, ...], np.ndarray]:
+    """The sensor readings of a hand-pose log (``readings``: column -> a reading a row of ``table``) as
+    :func:`identify` takes them: the channels the log has (in :data:`CHANNELS` order) and each one's reading
+    at the end of each control period ``(K, C)`` of its replay (:func:`log_actions`), interpolated linearly
+    between rows as the poses are, the blade's height zeroed at the first period's reading (as
+    :func:`measure` zeroes the twin's marker: a marker's mount is not known)."""
+    times, _ = hand_actions(table, hand_config(config), source)
+    channels = tuple(c for c in CHANNELS if c in readings)
+    if not channels:
+        raise ValueError(f"{source} carries no sensor readings: identification needs one or more of the columns "
+                         f"{list(CHANNELS)} (what softenv play records beside the hand's poses)")
+    elapsed = table[:, 0] - table[0, 0]
+    columns = []
+    for c in channels:
+        values = np.interp(times, elapsed, readings[c])
+        columns.append(values - values[0] if c == "blade_z_mm" else values)
+    return channels, np.column_stack(columns)
+
+
+def identify_log(path: str | Path, noise: dict[str, float], config: SceneConfig | None = None,
+                 names: Sequence[str] = PARAMETERS, **fit: Any) -> Identification:
+    """Fit ``names`` to the session a hand-pose log records (its poses and its sensor columns), on
+    ``config``'s scene (default: the scene the log records, as ``softenv score`` replays it); ``noise``:
+    each channel's sensor standard deviation, for every channel the log carries; ``fit``: :func:`identify`'s
+    ``iterations``, ``lr``, ``newton``."""
+    _, table = read_log(path, HAND_LOG)
+    source = f"trajectory {str(path)!r}"
+    config = haptic_config(read_scene(path)) if config is None else hand_config(config)
+    channels, measured = log_readings(table, read_readings(path), config, source)
+    missing = [c for c in channels if c not in noise]
+    if missing:
+        raise ValueError(f"noise={noise!r}: give the standard deviation of every channel the log carries ({missing} "
+                         "missing)")
+    actions = log_actions(table, config, source)
+    return identify(actions[:, None], measured[:, None], [noise[c] for c in channels], config, names, channels, **fit)
 
 
 def session_env(config: SceneConfig, sessions: int, steps: int) -> SoftSphereTorchVectorEnv:

@@ -43,6 +43,16 @@ origin and clock do not matter), and are interpolated linearly between rows (a d
 continuous path), which are at most ``MAX_GAP_S`` = 1 s apart (beyond that the path is unknown).
 Resampled at the scene's control period, the hand must not move faster than the device lets it:
 ``device.max_hand_speed`` along and across the blade, ``max_pitch_rate``, ``max_sweep_speed``.
+
+A hand-pose log may also carry what sensors on the device read at each row (``HAND_LOG.optional``,
+:data:`SENSOR_COLUMNS`; any of them, or none): what ``softenv play`` records and tissue identification
+(:func:`softenv.training.identify.identify_log`) fits; :func:`read_readings` reads them. Scoring and
+replay read the poses only.
+
+| column | unit | allowed |
+|---|---|---|
+| ``tongue_force_N`` | N | finite, >= 0: the tongue's normal force on the blade (a blade-mounted load cell) |
+| ``blade_z_mm`` | mm | finite: the blade's height (a tracked marker on its centre of mass; any zero) |
 """
 
 from __future__ import annotations
@@ -71,14 +81,16 @@ MAX_ROWS = 1_000_000            # 600 s sampled at 1.67 kHz; a table of them is 
 
 @dataclass(frozen=True)
 class Schema:
-    """A log's columns (``time_s`` first)."""
+    """A log's columns (``time_s`` first), and the columns it may also carry (read by :func:`read_readings`)."""
 
     name: str
     columns: tuple[str, ...]
+    optional: tuple[str, ...] = ()
 
 
 FORCE_LOG = Schema("force commands", ("time_s", "insertion_deg", "lateral_deg", "normal_N", "sideways_N"))
-HAND_LOG = Schema("hand poses", ("time_s", "hand_x_m", "hand_z_m", "hand_pitch_rad", "hand_y_m"))
+SENSOR_COLUMNS = ("tongue_force_N", "blade_z_mm")      # what a device's sensors read (the table above)
+HAND_LOG = Schema("hand poses", ("time_s", "hand_x_m", "hand_z_m", "hand_pitch_rad", "hand_y_m"), SENSOR_COLUMNS)
 SCHEMAS = (FORCE_LOG, HAND_LOG)
 # the example logs the docs score, shipped with the package (scripts/make_example_trajectories.py writes them)
 EXAMPLES_DIR = Path(str(files(__package__ or "softenv.training") / "examples"))
@@ -99,6 +111,40 @@ def read_log(path: str | Path, schema: Schema | None = None) -> tuple[Schema, np
     ``(n, 5)`` float table in the schema's column order. Sizes are checked before anything is
     allocated (``MAX_FILE_BYTES`` on disk, ``MAX_ROWS`` rows, an NPZ's members by their headers), and
     a CSV is parsed row by row, so memory stays bounded whatever the file claims."""
+    schema, table, _ = _read(path, schema)
+    return schema, table[:, :len(schema.columns)]
+
+
+def read_readings(path: str | Path) -> dict[str, np.ndarray]:
+    """The sensor readings a hand-pose log carries (:data:`SENSOR_COLUMNS` it has, each ``(n,)``, a reading
+    a row; empty when it has none), checked as the module docstring says."""
+    schema, table, names = _read(path, HAND_LOG)
+    return {c: table[:, len(schema.columns) + j] for j, c in enumerate(names)}
+
+
+def check_readings(readings: dict[str, Any], rows: int, source: str = "log") -> dict[str, np.ndarray]:
+    """Sensor readings by column (:data:`SENSOR_COLUMNS`), each ``rows`` finite real numbers, forces >= 0."""
+    out = {}
+    for c, values in readings.items():
+        if c not in SENSOR_COLUMNS:
+            raise ValueError(f"{source}: readings column {c!r} is not a sensor column; they are {list(SENSOR_COLUMNS)}")
+        v = np.asarray(values)
+        if v.shape != (rows,) or v.dtype.kind not in "iuf":
+            raise ValueError(f"{source}: readings column {c!r} must be {rows} real numbers (one a row), got shape "
+                             f"{v.shape} and dtype {v.dtype}")
+        v = v.astype(np.float64)
+        bad = ~np.isfinite(v) | ((v < 0) if c == "tongue_force_N" else False)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise ValueError(f"{source}: row {i + 1}, column {c!r} = {float(v[i])!r}: "
+                             + ("a force must be finite and >= 0" if c == "tongue_force_N" else "not finite"))
+        out[c] = v
+    return out
+
+
+def _read(path: str | Path, schema: Schema | None) -> tuple[Schema, np.ndarray, tuple[str, ...]]:
+    """:func:`read_log`'s reading: the schema, the table of its columns then of the optional columns the
+    file has (checked as :func:`check_table` checks the first part), and those optional columns' names."""
     path = Path(path)
     name = f"trajectory {str(path)!r}"
     if not path.exists():
@@ -111,10 +157,13 @@ def read_log(path: str | Path, schema: Schema | None = None) -> tuple[Schema, np
         raise ValueError(f"{name} has {path.stat().st_size:,} bytes; at most {MAX_FILE_BYTES:,} are read "
                          f"(a {MAX_DURATION_S:g} s trajectory needs far less)")
     try:
-        schema, table = _read_npz(path, name, schema) if path.suffix == ".npz" else _read_csv(path, name, schema)
+        schema, table, names = _read_npz(path, name, schema) if path.suffix == ".npz" else _read_csv(path, name, schema)
     except (OSError, EOFError, zipfile.BadZipFile, UnicodeDecodeError, csv.Error) as exc:
         raise ValueError(f"{name} cannot be read as {path.suffix[1:].upper()}: {exc}") from None
-    return schema, check_table(table, schema, name)
+    width = len(schema.columns)
+    checked = check_table(table[:, :width], schema, name)
+    check_readings({c: table[:, width + j] for j, c in enumerate(names)}, len(table), name)
+    return schema, np.column_stack([checked, table[:, width:]]), names
 
 
 def _pick_schema(present: list[str], name: str, schema: Schema | None) -> Schema:
@@ -135,20 +184,25 @@ def _pick_schema(present: list[str], name: str, schema: Schema | None) -> Schema
         raise ValueError(f"{name}: missing columns {missing}; has {present}, {best.name} need {list(best.columns)}"
                          + (f" (or {others})" if others else ""))
     found = complete[0]
-    extra = [c for c in present if c not in found.columns]
+    extra = [c for c in present if c not in found.columns and c not in found.optional]
     if extra:
-        raise ValueError(f"{name}: columns {extra} are not {found.name} columns {list(found.columns)}; a log holds "
-                         "exactly its schema's columns (remove the others)")
+        raise ValueError(f"{name}: columns {extra} are not {found.name} columns {list(found.columns)}"
+                         + (f" nor their optional ones {list(found.optional)}" if found.optional else "")
+                         + "; a log holds its schema's columns (remove the others)")
     return found
 
 
-def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray]:
+def _optional_present(schema: Schema, present: list[str]) -> tuple[str, ...]:
+    return tuple(c for c in schema.optional if c in present)
+
+
+def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray, tuple[str, ...]]:
     if not zipfile.is_zipfile(path):         # np.load would try it as a pickle and talk about that
         raise ValueError(f"{name} cannot be read as NPZ: not a zip archive")
     with zipfile.ZipFile(path) as archive:
         members = archive.infolist()
         names = [m.filename.removesuffix(".npy") for m in members]
-        if len(members) > 2 * len(SCHEMAS[0].columns) + 2:
+        if len(members) > max(len(s.columns) + len(s.optional) for s in SCHEMAS) + 2:
             raise ValueError(f"{name} has {len(members)} members; a log has one per column, format_version and "
                              "scene")
         repeated = sorted({n for n in names if names.count(n) > 1})
@@ -169,9 +223,11 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
         if ("scene" in data.files) != (int(version) == 2):
             raise ValueError(f"{name}: format_version={int(version)} "
                              f"{'needs a' if int(version) == 2 else 'has no'} scene member")
-        schema = _pick_schema([k for k in data.files if k not in ("format_version", "scene")], name, schema)
+        present = [k for k in data.files if k not in ("format_version", "scene")]
+        schema = _pick_schema(present, name, schema)
+        optional = _optional_present(schema, present)
         columns = {}
-        for c in schema.columns:
+        for c in schema.columns + optional:
             try:
                 column = data[c]
             except ValueError as exc:         # an object array (pickle) or a damaged member
@@ -183,7 +239,7 @@ def _read_npz(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
     lengths = {c: len(v) for c, v in columns.items()}
     if len(set(lengths.values())) > 1:
         raise ValueError(f"{name}: columns have unequal lengths {lengths}")
-    return schema, np.stack([columns[c].astype(np.float64) for c in schema.columns], axis=1)
+    return schema, np.stack([columns[c].astype(np.float64) for c in schema.columns + optional], axis=1), optional
 
 
 def read_scene(path: str | Path) -> dict[str, Any] | None:
@@ -257,15 +313,17 @@ def _check_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, key: str, n
                          "of at most 8 bytes")
 
 
-def _read_csv(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray]:
+def _read_csv(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.ndarray, tuple[str, ...]]:
     with open(path, newline="", encoding="utf-8") as fh:
         rows = csv.reader(line for line in fh if not line.startswith("#"))
         header = [h.strip() for h in next(rows, [])]
         if not header:
             raise ValueError(f"{name} is empty; expected a header row")
         schema = _pick_schema(header, name, schema)
-        index = [header.index(c) for c in schema.columns]
-        table = np.empty((1024, len(schema.columns)))          # grown by doubling, up to MAX_ROWS rows
+        optional = _optional_present(schema, header)
+        wanted = schema.columns + optional
+        index = [header.index(c) for c in wanted]
+        table = np.empty((1024, len(wanted)))          # grown by doubling, up to MAX_ROWS rows
         n = 0
         for i, row in enumerate(rows, start=1):
             if i > MAX_ROWS:
@@ -274,13 +332,13 @@ def _read_csv(path: Path, name: str, schema: Schema | None) -> tuple[Schema, np.
                 raise ValueError(f"{name}: row {i} has {len(row)} fields; the header has {len(header)}")
             if n == len(table):
                 table = np.concatenate([table, np.empty_like(table)])
-            for j, (col, k) in enumerate(zip(schema.columns, index)):
+            for j, (col, k) in enumerate(zip(wanted, index)):
                 try:
                     table[n, j] = float(row[k])
                 except ValueError:
                     raise ValueError(f"{name}: row {i}, column {col!r}: {row[k]!r} is not a number") from None
             n += 1
-    return schema, table[:n]
+    return schema, table[:n], optional
 
 
 def check_table(table: Any, schema: Schema, source: str = "trajectory") -> np.ndarray:
@@ -325,10 +383,17 @@ def check_limits(table: np.ndarray, schema: Schema, limits: dict[str, tuple[floa
 
 
 def save_log(table: np.ndarray, path: str | Path, schema: Schema, note: str = "",
-             scene: dict[str, Any] | None = None) -> None:
+             scene: dict[str, Any] | None = None, readings: dict[str, Any] | None = None) -> None:
     """Write a log as CSV of ``format_version`` 2, recording ``scene`` (the sections over the schema's id;
-    None: the id's own scene). Checked first; written atomically: a failed write leaves no short file."""
+    None: the id's own scene), with sensor ``readings`` (column -> a value a row: a hand-pose log's optional
+    columns). Checked first; written atomically: a failed write leaves no short file."""
     table = check_table(table, schema)
+    extra = dict(readings or {})
+    if extra and schema is not HAND_LOG:
+        raise ValueError(f"readings {sorted(extra)}: only a hand-pose log carries sensor readings")
+    extra = check_readings(extra, len(table), f"log {str(path)!r}")
+    names = [c for c in SENSOR_COLUMNS if c in extra]
+    full = np.column_stack([table, *(extra[c] for c in names)])
     record = f'{SCENE_TAG}{{"format_version": 2, "scene": {scene_json(scene)}}}\n'
 
     def write(fh: Any) -> None:
@@ -336,8 +401,8 @@ def save_log(table: np.ndarray, path: str | Path, schema: Schema, note: str = ""
         if note:
             fh.write(f"# {note}\n")
         writer = csv.writer(fh)
-        writer.writerow(schema.columns)
-        for row in table:
+        writer.writerow(schema.columns + tuple(names))
+        for row in full:
             writer.writerow([f"{v:.9g}" for v in row])
 
     atomic_write(path, write, text=True)

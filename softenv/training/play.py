@@ -11,7 +11,8 @@ and waits for Space, Enter or a click; then the scene (SoftSphereHaptic-v0's, or
 title names it) runs toward the family-centre
 target (the one trainee scoring uses) for ``seconds``, one frame per control period
 (:mod:`softenv.training.play_view`), Space or P pausing it and Esc ending it early; the hand's pose is
-recorded every control period as a device log (:data:`softenv.training.logs.HAND_LOG`), written, and
+recorded every control period as a device log (:data:`softenv.training.logs.HAND_LOG`, with what the
+device's sensors read: the tongue's force on the blade and the blade's height), written, and
 scored with :func:`softenv.training.scoring.score_file`, which replays the log through the same
 physics: the score is the session's own (tested). An end screen shows the score, each part against
 the expert's and the two things to improve first, and stays until the window is closed.
@@ -34,9 +35,9 @@ from ..envs.config import scene_sections
 from ..haptics.arms import BACKENDS
 from ..haptics.bridge import LOOPBACK, BridgeServer
 from ..sections import SceneConfig
-from .hand import hand_config, haptic_config, reach_env, relative_hand_pose, workspace
+from .hand import hand_config, haptic_config, reach_env, relative_hand_pose, sensor_readings, workspace
 from .inputs import ArmInput, BridgeInput, InputDevice, PygameInput
-from .logs import HAND_LOG, read_log, save_log
+from .logs import HAND_LOG, SENSOR_COLUMNS, read_log, save_log
 from .play_view import SIZE, PlayView
 from .scoring import INCISOR_LIMIT_N, score_log
 
@@ -108,6 +109,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
         hand = device if device is not None else (
             BridgeInput(bridge, 0.0 if realtime else 1.0) if bridge is not None else PygameInput(pygame))
         poses = [relative_hand_pose(env)]
+        readings = [sensor_readings(env)]               # the log's sensor columns, a row each
         info: dict[str, Any] = {}
         quit_ = screens and _start_screen(pygame, view, env, next_events, shown, realtime)
         paused, step, started = False, 0, time.perf_counter()
@@ -132,6 +134,7 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
             step += 1
             hand.feel(step, step * dt, info["haptic_force_N"])
             poses.append(relative_hand_pose(env))
+            readings.append(sensor_readings(env))
             view.frame(env, info, step, steps, dt)
             shown("run", view)
             if realtime:
@@ -146,7 +149,8 @@ def run(seconds: float = 10.0, out_dir: str | Path = "play", scene: dict[str, An
         out = Path(out_dir)
         path = out / f"session_{time.strftime('%Y%m%d-%H%M%S')}.csv"
         save_log(log, path, HAND_LOG, note=f"softenv play, {scene_title(config['airway'])}, {len(poses) - 1} steps of {dt:g} s, "
-                 f"driven by {hand.describe()}", scene=scene)
+                 f"driven by {hand.describe()}", scene=scene,
+                 readings={c: np.array([r[c] for r in readings]) for c in SENSOR_COLUMNS})
         live = env.device.clinical_summary(env.b)
         _, logged = read_log(path, HAND_LOG)         # scored as written (9 digits), as `softenv score` of the file is
         report = score_log(logged, HAND_LOG, config, path, sections, "the log", out)
