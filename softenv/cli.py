@@ -151,8 +151,7 @@ def cmd_bench(args: argparse.Namespace, argv: list[str]) -> None:
     if args.device == "cuda" and not bench.cuda_available():
         raise ValueError("--device cuda: no CUDA device is usable here (a CPU build of torch, or no GPU); "
                          "use --device cpu")
-    if not bench.threads_pinned():
-        bench.reexec_single_threaded(argv)
+    bench.rerun_single_threaded(argv)
     bench.run(args.quick, Path(args.out), args.only, command=bench.command_line(argv), device=args.device)
 
 
@@ -175,8 +174,7 @@ def compare_plan(args: argparse.Namespace) -> tuple[benchmark.Plan, str]:
 
 
 def cmd_compare(args: argparse.Namespace, argv: list[str]) -> None:
-    if not bench.threads_pinned():
-        bench.reexec_single_threaded(argv)
+    bench.rerun_single_threaded(argv)
     missing = [name for name in ("stable_baselines3", "torch", "matplotlib") if importlib.util.find_spec(name) is None]
     if missing:
         raise ValueError(f"softenv compare needs the rl and viz extras (pip install 'softenv[all]'): {missing} missing")
@@ -486,7 +484,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "differentiable torch twin: minutes a laryngoscope scene)")
     p.add_argument("--agents", nargs="*", choices=list(benchmark.AGENTS), metavar="AGENT",
                    help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
-                   "present; every scene) (default: quick and full: the four SB3 agents)")
+                   "present; every scene), shac (first-order, through the differentiable torch twin), bc-KIND and "
+                   "td3bc-KIND (offline, on a Minari dataset of KIND: expert oracle mixed novice random ppo) "
+                   "(default: quick and full: the four SB3 agents)")
     p.add_argument("--episodes", type=_bounded(int, 1, 100_000),
                    help="test episodes per policy and scene (1-100000; default 100)")
     p.add_argument("--out", default="reports", help="report directory (default: reports, which git ignores; "

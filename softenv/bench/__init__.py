@@ -58,12 +58,14 @@ def threads_pinned() -> bool:
     return all(os.environ.get(v) == "1" for v in THREAD_VARS)
 
 
-def rerun_single_threaded(**extra: str) -> None:
-    """Replace this script's process by the same command with one BLAS/OpenMP thread (and ``extra``
-    variables), unless it already runs so: BLAS reads its thread count when numpy loads, which a script
-    has done by the time it parses its arguments."""
+def rerun_single_threaded(argv: list[str] | None = None, **extra: str) -> None:
+    """Replace this process by the same command with one BLAS/OpenMP thread (and ``extra`` variables),
+    unless it already runs so: BLAS reads its thread count when numpy loads, which a script has done by
+    the time it parses its arguments. ``argv``: run ``python -m softenv ARGV`` (a CLI command) rather than
+    this script again."""
     if not threads_pinned():
-        os.execve(sys.executable, [sys.executable, *sys.argv], {**os.environ, **single_thread_environment(), **extra})
+        command = [sys.executable, *sys.argv] if argv is None else [sys.executable, "-m", "softenv", *argv]
+        os.execve(sys.executable, command, {**single_thread_environment(), **extra})
 
 
 def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str = "softenv bench",
@@ -136,6 +138,3 @@ def command_line(argv: list[str]) -> str:
     return prefix + " ".join(["softenv", *argv])
 
 
-def reexec_single_threaded(argv: list[str]) -> None:
-    """Replace this process by ``python -m softenv ARGV`` with one BLAS thread (set before numpy loads)."""
-    os.execve(sys.executable, [sys.executable, "-m", "softenv", *argv], single_thread_environment())
