@@ -4,7 +4,7 @@ force (the score's 0) and under the planning oracle (its 100), into ``softenv/ba
 names the commit and this command. It runs with one BLAS thread and an empty cache of its own, as the
 tests and ``softenv compare`` do (a scene's shape model built with other BLAS threads differs in the last
 bits). Nearly all of its time is the laryngoscope oracle's search (16 candidates x 120 iterations from
-each of three starts, per episode): about an hour on 2 cores (``docs/results.md`` has the measured figure).
+each of three starts, per episode): under two hours on 2 cores (``docs/results.md`` has the measured figure).
 
     python scripts/make_anchors.py [--scenes SCENE ...] [--episodes 100] [--jobs 2]
 """
