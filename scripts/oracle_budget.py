@@ -63,7 +63,7 @@ def main() -> None:
     command = "python scripts/oracle_budget.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     started = time.perf_counter()
     seeds = episode_seeds(args.episodes)
-    marks = [m for m in MARKS if m <= args.iterations]
+    marks = [m for m in MARKS if m < args.iterations] + [args.iterations]     # and the full budget
     record: dict[str, dict] = {}
     rows = []
     # top: every start over the whole range; bottom: the starts from the expert near 100, which the
