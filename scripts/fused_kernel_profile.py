@@ -25,6 +25,7 @@ from typing import Any
 import torch
 import triton
 from triton.backends.compiler import GPUTarget
+from triton.backends.nvidia.compiler import get_ptxas
 from triton.runtime import driver
 
 from softenv._artifact import write_text
@@ -74,7 +75,8 @@ def ptxas_report(ptx: str, capability: int, work: Path) -> dict[str, int]:
     path = work / "kernel.ptx"
     path.write_text(ptx)
     arch = f"sm_{capability}a" if capability >= 90 else f"sm_{capability}"
-    log = subprocess.run([str(TOOLS / "ptxas"), f"-arch={arch}", "-v", "-O3", str(path), "-o", str(work / "kernel.cubin")],
+    # the ptxas Triton itself compiles with for this target (since Triton 3.8 a newer one from sm_90 up)
+    log = subprocess.run([get_ptxas(capability).path, f"-arch={arch}", "-v", "-O3", str(path), "-o", str(work / "kernel.cubin")],
                          capture_output=True, text=True, check=True).stderr
     entry = log.split("Function properties for _control_period")[1]
     numbers = [int(x) for x in re.findall(r"(\d+) (?:bytes stack frame|bytes spill stores|bytes spill loads|registers)",
