@@ -7,8 +7,11 @@ of its rounds (the 2-core machines drift by tens of percent within the hour, so 
 side by side compare). A round is each tree's own ``softenv.bench.env.twin_step_timing``:
 ``SoftSphereHaptic-v0``'s batched twin on its default engine, at 1, 8, 64, 1,024 and 8,192 envs, with
 uniformly random actions (the blade on the incisors much of the time: the collision's workload) and with
-pressing actions (the tongue's). The default reference, ``2576317``, is the last commit whose default
-engine was the numba kernel the Warp kernel replaced; its own dependencies must be importable (numba).
+pressing actions (the tongue's). Each round also times a fresh process of each tree from its first line
+to its first step of 8 envs (imports, the env built from the scene cache, the kernel compiled or loaded),
+with Warp's kernel cache as the earlier runs left it and empty (``WARP_CACHE_PATH`` a new folder). The
+default reference, ``2576317``, is the last commit whose default engine was the numba kernel the Warp
+kernel replaced; its own dependencies must be importable (numba).
 
     python scripts/speed_against.py [--ref 2576317] [--rounds 3] [--sizes 1 8 64 1024 8192]
                                     [--out results/speed-against-numba]
@@ -47,6 +50,18 @@ for n in sizes:
     out[n] = n / twin_step_timing("SoftSphereHaptic-v0", n, max(2, 20_000 // n), actions).median
 print(json.dumps(out))
 """
+# a fresh process's first step (no argv): seconds from its first line to its first step of 8 envs
+FIRST_STEP = """
+import json, time
+started = time.perf_counter()
+import gymnasium as gym
+import softenv
+venv = gym.make_vec("SoftSphereHaptic-v0", num_envs=8, vectorization_mode="vector_entry_point")
+venv.reset(seed=0)
+venv.step(venv.action_space.sample())
+print(json.dumps(time.perf_counter() - started))
+"""
+KERNEL_CACHES = ("warm", "empty")
 
 
 def one_round(tree: Path, workload: str, sizes: list[int]) -> dict[int, float]:
@@ -57,21 +72,41 @@ def one_round(tree: Path, workload: str, sizes: list[int]) -> dict[int, float]:
     return {int(n): rate for n, rate in json.loads(done.stdout.strip().splitlines()[-1]).items()}
 
 
-def measure(trees: dict[str, Path], rounds: int, sizes: list[int]) -> dict[str, dict[str, dict[int, list[float]]]]:
-    """Every round's rates: ``[workload][tree][size]``, the trees alternating."""
-    out: dict[str, dict[str, dict[int, list[float]]]] = {
+def first_step(tree: Path, kernel_cache: str) -> float:
+    """Seconds a fresh process running ``tree``'s code takes to its first step (:data:`FIRST_STEP`), with
+    Warp's kernel cache ``"warm"`` (where earlier processes left it) or ``"empty"``."""
+    env = {**single_thread_environment(), "PYTHONPATH": str(tree)}
+    with tempfile.TemporaryDirectory() as cache:
+        if kernel_cache == "empty":
+            env["WARP_CACHE_PATH"] = cache
+        done = subprocess.run([sys.executable, "-c", FIRST_STEP], cwd=tree, env=env, capture_output=True, text=True,
+                              check=True)
+    return float(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+def measure(trees: dict[str, Path], rounds: int, sizes: list[int]
+            ) -> tuple[dict[str, dict[str, dict[int, list[float]]]], dict[str, dict[str, list[float]]]]:
+    """Every round's rates ``[workload][tree][size]`` and first-step times ``[kernel cache][tree]``, the
+    trees alternating. A first process of each tree (not counted) fills the scene's and the kernel's caches."""
+    for tree in trees.values():
+        first_step(tree, "warm")
+    rates: dict[str, dict[str, dict[int, list[float]]]] = {
         w: {name: {n: [] for n in sizes} for name in trees} for w in WORKLOADS}
+    starts: dict[str, dict[str, list[float]]] = {c: {name: [] for name in trees} for c in KERNEL_CACHES}
     for r in range(rounds):
         for workload in WORKLOADS:
             for name, tree in trees.items():
                 for n, rate in one_round(tree, workload, sizes).items():
-                    out[workload][name][n].append(rate)
+                    rates[workload][name][n].append(rate)
                 print(f"round {r + 1}/{rounds} {workload} {name}: done", flush=True)
-    return out
+        for cache in KERNEL_CACHES:
+            for name, tree in trees.items():
+                starts[cache][name].append(first_step(tree, cache))
+    return rates, starts
 
 
-def report(samples: dict[str, dict[str, dict[int, list[float]]]], ref: str, ref_commit: str,
-           command: str) -> tuple[str, dict[str, Any]]:
+def report(samples: dict[str, dict[str, dict[int, list[float]]]], starts: dict[str, dict[str, list[float]]],
+           ref: str, ref_commit: str, command: str) -> tuple[str, dict[str, Any]]:
     lines = [f"# The laryngoscope's batched twin at this commit against `{ref_commit}`", "",
              f"Made by `{command}` at commit `{code_revision()}`; the reference `{ref}` = `{ref_commit}` ran from a "
              "git worktree in the same venv. Fresh processes alternating between the trees, one CPU thread; each "
@@ -88,9 +123,14 @@ def report(samples: dict[str, dict[str, dict[int, list[float]]]], ref: str, ref_
                          f"[{pairs.min():.2f}, {pairs.max():.2f}] |")
             table.append({"workload": workload, "envs": n, "reference": old, "this_commit": new, "ratio": ratio})
     lowest = min(row["ratio"] for row in table)
-    lines += ["", f"Lowest ratio: {lowest:.2f} ({'no' if lowest >= 1.0 else 'a'} row slower than the reference)."]
+    lines += ["", f"Lowest ratio: {lowest:.2f} ({'no' if lowest >= 1.0 else 'a'} row slower than the reference).", "",
+              "A fresh process from its first line to its first step of 8 envs (seconds, median over rounds; the "
+              "numba kernel has no disk cache, so it compiles in every process):", "",
+              "| Warp's kernel cache | reference (s) | this commit (s) |", "|---|---|---|"]
+    lines += [f"| {cache} | {np.median(by_tree['reference']):.2f} | {np.median(by_tree['this commit']):.2f} |"
+              for cache, by_tree in starts.items()]
     return "\n".join(lines) + "\n", {"command": command, "commit": code_revision(), "reference": ref,
-                                    "reference_commit": ref_commit, "rows": table}
+                                    "reference_commit": ref_commit, "rows": table, "first_step_s": starts}
 
 
 def main() -> None:
@@ -112,10 +152,10 @@ def main() -> None:
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(old), ref_commit], check=True,
                        capture_output=True)
         try:
-            samples = measure({"reference": old, "this commit": ROOT}, args.rounds, args.sizes)
+            samples, starts = measure({"reference": old, "this commit": ROOT}, args.rounds, args.sizes)
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(old)], check=True)
-    text, data = report(samples, args.ref, ref_commit, command)
+    text, data = report(samples, starts, args.ref, ref_commit, command)
     write_text(args.out / "README.md", text)
     write_text(args.out / "results.json", json.dumps(data, indent=2) + "\n")
     print(text)
