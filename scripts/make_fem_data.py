@@ -7,7 +7,10 @@ For the scene of ``--env-id`` with ``tissue={"model": "fem"}`` (its workspace sa
 and contact curve, softenv.fem.data.fe_scene_data), writes ``<out>/<env-id>.npz`` (default out:
 softenv/fem/shipped, where scenes find it by its header) and ``<report>`` (sizes, time, array digest,
 command). Ramps are cached one by one: a stopped run, started again, solves only what is missing;
-``--fresh`` uses an empty cache, to time (and check the bits of) a regeneration from nothing.
+``--fresh`` uses an empty cache, to time (and check the bits of) a regeneration from nothing;
+``--check`` writes the data to a temporary folder instead and compares it with the shipped file:
+
+    python scripts/make_fem_data.py --jobs 2 --fresh --check     # results/fem-data.md, the shipped file kept
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -32,6 +36,24 @@ def array_digest(path: Path) -> str:
     return digest.hexdigest()
 
 
+def largest_difference(path: Path, other: Path) -> float:
+    """The largest absolute difference between two files' arrays over the largest magnitude of the first's
+    (0.0: equal bit for bit); a different set of arrays, shape or dtype raises ValueError, naming it."""
+    with np.load(path, allow_pickle=False) as a, np.load(other, allow_pickle=False) as b:
+        names = sorted(n for n in a.files if n != "__meta__")
+        if names != sorted(n for n in b.files if n != "__meta__"):
+            raise ValueError(f"{other} holds arrays {sorted(b.files)}, {path} {sorted(a.files)}")
+        worst, scale = 0.0, 0.0
+        for name in names:
+            x, y = a[name], b[name]
+            if x.shape != y.shape or x.dtype != y.dtype:
+                raise ValueError(f"{name}: {other} has {y.dtype}{list(y.shape)}, {path} {x.dtype}{list(x.shape)}")
+            if x.size:
+                worst = max(worst, float(np.abs(x.astype(np.float64) - y).max()))
+                scale = max(scale, float(np.abs(x).max()))
+    return worst / scale if worst else 0.0
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env-id", default="SoftSphere-v0")
@@ -40,6 +62,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--executor", default="local", choices=["local", "ray"])
     parser.add_argument("--fresh", action="store_true", help="solve every ramp again (an empty cache)")
+    parser.add_argument("--check", action="store_true",
+                        help="write to a temporary folder and compare with the file in --out (which is kept)")
     args = parser.parse_args()
     if args.fresh:
         os.environ["SOFTENV_CACHE_DIR"] = tempfile.mkdtemp(prefix="softenv-fem-")   # before softenv reads it
@@ -52,6 +76,7 @@ def main() -> None:
     from softenv.fem.data import fe_scene_data
     from softenv.parallel import Interrupted
 
+    revision = code_revision()            # before the data is written: the shipped file is tracked
     config = scene_config({**ENV_SCENES, **HAPTIC_SCENES}[args.env_id], {"tissue": {"model": "fem"}})
     request = fe_request(config)
     started = time.perf_counter()
@@ -62,9 +87,18 @@ def main() -> None:
               file=sys.stderr)
         raise SystemExit(stop.exit_status) from None
     seconds = time.perf_counter() - started
-    path = Path(args.out) / f"{args.env_id}.npz"
+    shipped = Path(args.out) / f"{args.env_id}.npz"
+    path = Path(tempfile.mkdtemp(prefix="softenv-fem-check-")) / shipped.name if args.check else shipped
     data.save(path)
     size = path.stat().st_size
+    if args.check:
+        difference = largest_difference(shipped, path)
+        against = (f"Against the shipped `{shipped}` (array sha256 `{array_digest(shipped)}`): "
+                   + ("equal bit for bit." if difference == 0.0 else
+                      f"the arrays' largest difference is {difference:.1e} of their largest value; the shipped file "
+                      "is kept.") + "\n\n")
+    else:
+        against = ""
     fe = request.fe
     text = (f"# FE data of {args.env_id} with tissue.model='fem'\n\n"
             f"FE tongue: {fe.cells_per_side} cells a side, E = {fe.E / 1e3:.1f} kPa, nu = {fe.nu}, radius "
@@ -77,10 +111,13 @@ def main() -> None:
             f"- contact curve: {request.curve_steps} load steps to {request.high[2]:g} N at the top: indentation "
             f"{data.curve_depths[-1] * 1e3:.2f} mm; lateral compliance {data.lateral_compliance * 1e3:.3f} mm/N\n\n"
             f"Solved in {seconds:.0f} s over {args.jobs} {args.executor} workers"
-            f"{' from an empty cache' if args.fresh else ''} on {os.cpu_count()} cores; `{path}` is "
-            f"{size / 1e6:.1f} MB; array sha256 `{array_digest(path)}`.\n\n"
-            f"Made by `python {' '.join(sys.argv)}` at {code_revision()} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
+            f"{' from an empty cache' if args.fresh else ''} on {os.cpu_count()} cores; "
+            f"{'the regenerated file' if args.check else f'`{path}`'} is "
+            f"{size / 1e6:.1f} MB; array sha256 `{array_digest(path)}`.\n\n{against}"
+            f"Made by `python {' '.join(sys.argv)}` at {revision} ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).\n")
     atomic_write(Path(args.report), lambda fh: fh.write(text), text=True)
+    if args.check:
+        shutil.rmtree(path.parent)
     print(text)
 
 
