@@ -223,9 +223,9 @@ def test_an_analytic_scene_is_keyed_as_before_the_fem_model():
 
 
 def test_the_fem_data_check_compares_the_arrays_bit_for_bit_then_by_their_largest_difference(tmp_path):
-    """``scripts/make_fem_data.py --check``'s comparison: 0.0 for equal arrays (the metadata aside), the
-    largest absolute difference over the first file's largest magnitude otherwise, and a refusal naming the
-    array when the two files do not hold the same arrays."""
+    """``scripts/make_fem_data.py --check``'s comparison: 0.0 for equal arrays (the metadata aside), else the
+    largest difference of an array over its own largest magnitude, and a refusal naming the array when the
+    two files do not hold the same arrays."""
     import importlib.util
     from pathlib import Path
 
@@ -234,14 +234,15 @@ def test_the_fem_data_check_compares_the_arrays_bit_for_bit_then_by_their_larges
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     shapes = np.arange(12.0).reshape(3, 4) - 4.0                       # largest magnitude 7
-    np.savez(tmp_path / "a.npz", shapes=shapes, ids=np.arange(3), __meta__=np.array("one"))
-    np.savez(tmp_path / "b.npz", shapes=shapes.copy(), ids=np.arange(3), __meta__=np.array("another"))
+    loads = np.array([10.0, 40.0])                                    # largest magnitude 40
+    np.savez(tmp_path / "a.npz", shapes=shapes, loads=loads, __meta__=np.array("one"))
+    np.savez(tmp_path / "b.npz", shapes=shapes.copy(), loads=loads.copy(), __meta__=np.array("another"))
     assert script.largest_difference(tmp_path / "a.npz", tmp_path / "b.npz") == 0.0
     moved = shapes.copy()
-    moved[1, 2] += 3.5e-9
-    np.savez(tmp_path / "c.npz", shapes=moved, ids=np.arange(3), __meta__=np.array("one"))
+    moved[1, 2] += 3.5e-9                                             # 0.5e-9 of the shapes' 7
+    np.savez(tmp_path / "c.npz", shapes=moved, loads=loads + [0.0, 4e-9], __meta__=np.array("one"))   # 1e-10 of 40
     assert script.largest_difference(tmp_path / "a.npz", tmp_path / "c.npz") == pytest.approx(0.5e-9, rel=1e-6)
-    np.savez(tmp_path / "d.npz", shapes=shapes[:2], ids=np.arange(3), __meta__=np.array("one"))
+    np.savez(tmp_path / "d.npz", shapes=shapes[:2], loads=loads, __meta__=np.array("one"))
     with pytest.raises(ValueError, match=r"shapes: .*d\.npz has float64\[2, 4\]"):
         script.largest_difference(tmp_path / "a.npz", tmp_path / "d.npz")
     np.savez(tmp_path / "e.npz", shapes=shapes, __meta__=np.array("one"))
