@@ -58,8 +58,8 @@ class Plan:
 
 
 TORCH_PPO = "ppo-torch"          # baselines/ppo_torch.py: an agent on request, not in the default plans
-SHAC = "shac"                    # baselines/shac.py: the first-order agent (differentiable torch twin), on request
-GRADIENT_PLANNER = "gradient"    # baselines/gradient_planner.py: a planner on request (--policies gradient), as costly as the oracle
+SHAC = "shac"                    # baselines/shac.py: the first-order agent (differentiable torch twin): full plan
+GRADIENT_PLANNER = "gradient"    # baselines/gradient_planner.py: a planner as costly as the oracle: full plan
 POLICIES = (*BASELINES, GRADIENT_PLANNER)
 OFFLINE_METHODS = ("bc", "td3bc")                      # baselines/offline.py's methods (torchrl: the offline extra)
 # gradient steps: what two cores afford for 36 learners in under an hour; TD3+BC's paper trains 1M, so its rows
@@ -92,7 +92,10 @@ TRAIN_GRADES = (1, 2)          # the easier airways agents train on in the grade
 
 
 def full_plan() -> Plan:
-    return Plan(list(MAIN_SCENES), list(BASELINES), list(ALGOS), {s: training_seeds(s) for s in MAIN_SCENES})
+    """Every main scene: every baseline and the gradient planner, the four SB3 agents and SHAC (the gradient
+    methods against the sampled ones on one table), :func:`training_seeds` each."""
+    return Plan(list(MAIN_SCENES), [*BASELINES, GRADIENT_PLANNER], [*ALGOS, SHAC],
+                {s: training_seeds(s) for s in MAIN_SCENES})
 
 
 def haptic_plan() -> Plan:

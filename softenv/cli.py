@@ -467,8 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
                          help="SoftSphere-v0 and SoftSphereHaptic-v0, short agent training (under 3 minutes on 2 cores)")
     profile.add_argument("--haptic", action="store_true",
                          help="the two laryngoscope scenes, every baseline, the four agents at their converged budgets "
-                              "over 3 seeds (report benchmark_haptic.*; on 2 cores about 3 h from an empty --runs, 9 min with "
-                              "its agents trained)")
+                              "over 10 seeds (report benchmark_haptic.*; on 2 cores most of a day from an empty --runs, "
+                              "minutes with its agents trained)")
     profile.add_argument("--graded", action="store_true",
                          help="the difficult airways: SoftSphereAirway-v0 at every grade, its baselines and oracle "
                               "per grade, the agents trained on grades 1 and 2 and evaluated on every grade "
@@ -480,13 +480,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"benchmark scenes: {', '.join(benchmark.SCENES)} (default: all in full mode)")
     p.add_argument("--policies", nargs="*", choices=list(benchmark.POLICIES), metavar="POLICY",
                    help=f"baseline policies: {', '.join(benchmark.BASELINES)} (default: all; none: no baselines); "
-                        f"{benchmark.GRADIENT_PLANNER!r} on request (Adam on each test episode's actions through the "
-                        "differentiable torch twin: minutes a laryngoscope scene)")
+                        f"{benchmark.GRADIENT_PLANNER!r} (Adam on each test episode's actions through the "
+                        "differentiable torch twin: most of an hour a laryngoscope scene) in the full profile, on "
+                        "request in the others")
     p.add_argument("--agents", nargs="*", choices=list(benchmark.AGENTS), metavar="AGENT",
                    help="agents: ppo sac td3 sac-her (SB3), ppo-torch (baselines/ppo_torch.py, on the GPU when "
                    "present; every scene), shac (first-order, through the differentiable torch twin), bc-KIND and "
                    "td3bc-KIND (offline, on a Minari dataset of KIND: expert oracle mixed novice random ppo) "
-                   "(default: quick and full: the four SB3 agents)")
+                   "(default: quick, haptic and graded: the four SB3 agents; full: those and shac)")
     p.add_argument("--episodes", type=_bounded(int, 1, 100_000),
                    help="test episodes per policy and scene (1-100000; default 100)")
     p.add_argument("--out", default="reports", help="report directory (default: reports, which git ignores; "

@@ -432,8 +432,9 @@ def test_the_baselines_load_without_pymunk(heavy_modules_after):
 
 
 def test_compare_profiles_name_their_scenes_seeds_budgets_and_report():
-    """`softenv compare`'s profiles: quick, the laryngoscope scenes alone (--haptic) and the full run; the
-    two named profiles exclude each other, and --scenes narrows a profile keeping its seed rule."""
+    """`softenv compare`'s profiles: quick, the laryngoscope scenes alone (--haptic) and the full run (with
+    the gradient planner and SHAC); the two named profiles exclude each other, and --scenes narrows a
+    profile keeping its seed rule."""
     from softenv.cli import build_parser, compare_plan
 
     parser = build_parser()
@@ -445,7 +446,11 @@ def test_compare_profiles_name_their_scenes_seeds_budgets_and_report():
     full, stem = compare_plan(parser.parse_args(["compare", "--scenes", "SoftSphereHapticProcedure-v0", "--agents"]))
     assert stem == "benchmark" and full.scenes == ["SoftSphereHapticProcedure-v0"] and full.agents == []
     assert full.seeds == {"SoftSphereHapticProcedure-v0": 10}
-    assert compare_plan(parser.parse_args(["compare"]))[0].seeds["SoftSphere-v0/stiffening"] == 5
+    whole = compare_plan(parser.parse_args(["compare"]))[0]
+    assert whole.seeds["SoftSphere-v0/stiffening"] == 5
+    # the gradient methods beside the sampled ones, in the full profile only
+    assert "gradient" in whole.baselines and whole.agents == ["ppo", "sac", "td3", "sac-her", "shac"]
+    assert "gradient" not in haptic.baselines and "shac" not in haptic.agents
     quick, stem = compare_plan(parser.parse_args(["compare", "--quick", "--episodes", "7"]))
     assert stem == "benchmark_quick" and quick.episodes == 7 and quick.timesteps["ppo"] == 50_000
     with pytest.raises(SystemExit):
