@@ -64,18 +64,22 @@ print(json.dumps(time.perf_counter() - started))
 KERNEL_CACHES = ("warm", "empty")
 
 
+def tree_environment(tree: Path) -> dict[str, str]:
+    """The environment of a fresh process running ``tree``'s code on one thread."""
+    return {**single_thread_environment(), "PYTHONPATH": str(tree)}
+
+
 def one_round(tree: Path, workload: str, sizes: list[int]) -> dict[int, float]:
     """Env-steps/s at each size, measured by a fresh process running ``tree``'s code."""
-    env = {**single_thread_environment(), "PYTHONPATH": str(tree)}
-    done = subprocess.run([sys.executable, "-c", ROUND, workload, *map(str, sizes)], cwd=tree, env=env,
-                          capture_output=True, text=True, check=True)
+    done = subprocess.run([sys.executable, "-c", ROUND, workload, *map(str, sizes)], cwd=tree,
+                          env=tree_environment(tree), capture_output=True, text=True, check=True)
     return {int(n): rate for n, rate in json.loads(done.stdout.strip().splitlines()[-1]).items()}
 
 
 def first_step(tree: Path, kernel_cache: str) -> float:
     """Seconds a fresh process running ``tree``'s code takes to its first step (:data:`FIRST_STEP`), with
     Warp's kernel cache ``"warm"`` (where earlier processes left it) or ``"empty"``."""
-    env = {**single_thread_environment(), "PYTHONPATH": str(tree)}
+    env = tree_environment(tree)
     with tempfile.TemporaryDirectory() as cache:
         if kernel_cache == "empty":
             env["WARP_CACHE_PATH"] = cache
