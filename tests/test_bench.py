@@ -47,6 +47,19 @@ def test_blas_advice_only_for_avx2_kernels_on_an_avx512_cpu(monkeypatch):
     assert timing.blas_advice() is None
 
 
+def test_steadiness_names_a_host_whose_speed_moved_during_the_run():
+    steady = timing.Timing(np.array([1.00, 1.01, 1.02, 1.03]) * 1e-5)
+    assert bench.steadiness(steady, steady) is None
+    # a spread like this session's busy VM (CartPole's IQR 44,050-66,189 steps/s about 45,465)
+    spread = timing.Timing(np.array([1.0, 1.0, 1.5, 1.5, 2.0]) * 1e-5)
+    assert "spread 33%" in bench.steadiness(spread, spread)      # (1.5 - 1.0) / 1.5
+    # steady within each timing, but 25 % slower at the end: the rate changed -20 %
+    slower = timing.Timing(steady.samples * 1.25)
+    warning = bench.steadiness(steady, slower)
+    assert warning is not None and "changed -20%" in warning and "within 10%" in warning
+    assert bench.steadiness(steady, timing.Timing(steady.samples * 1.05)) is None
+
+
 def test_command_line_states_the_openblas_kernel_setting(monkeypatch):
     monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
     assert bench.command_line(["bench", "--quick"]) == "OPENBLAS_CORETYPE=Haswell softenv bench --quick"
@@ -64,6 +77,9 @@ def test_bench_run_writes_reports_with_machine_facts(tmp_path):
     assert payload["machine"]["openblas_kernels"] == timing.openblas_kernels()
     assert payload["machine"]["OPENBLAS_CORETYPE"] == os.environ.get("OPENBLAS_CORETYPE", "unset")
     assert payload["blas_advice"] == timing.blas_advice()
+    # the reference is timed at the start and at the end; a host whose speed moved between them is named
+    assert [r.section for r in (rows[0], rows[-1])] == ["reference", "reference"] and rows[-1].value > 0
+    assert "unsteady_host" in payload and (payload["unsteady_host"] is None) == ("Warning: this host" not in (tmp_path / "perf_quick.md").read_text())
     assert payload["code"] == timing.code_revision()
     md = (tmp_path / "perf_quick.md").read_text()
     assert f"softenv bench --quick --only fit` at {payload['code']} in" in md and "| shape model | fit, paper data" in md

@@ -14,7 +14,7 @@ from typing import Callable
 
 from .._artifact import atomic_write_all
 from ..parallel import THREAD_VARS
-from .timing import Row, blas_advice, cartpole_steps_per_second, code_revision, machine_info
+from .timing import Row, Timing, blas_advice, cartpole_steps_per_second, code_revision, machine_info
 
 # section name -> (module, function); each function takes ``(quick, reference)`` -- the CartPole-v1
 # step timing of this run -- and returns rows
@@ -36,6 +36,24 @@ SECTIONS: dict[str, tuple[str, str]] = {
 GPU_SECTIONS = ["gpu", "gpu-haptic"]
 DEFAULT_SECTIONS = [name for name in SECTIONS if name not in GPU_SECTIONS]
 
+# the reference's interquartile range, or its change from a run's start to its end, beyond this share of
+# its median: the host's speed moved under the run (a busy or throttled VM), so its rates are not comparable
+UNSTEADY = 0.10
+
+
+def steadiness(start: Timing, end: Timing) -> str | None:
+    """A warning when CartPole-v1's step time, timed at a run's ``start`` and ``end``, says the host's speed
+    moved during the run (spread or drift beyond :data:`UNSTEADY`), else None. Ratios measured side by side
+    (paired runs, fresh processes alternating) still hold on such a host; absolute rates and the targets
+    stated in them do not compare with another run's."""
+    spread = max((t.p75 - t.p25) / t.median for t in (start, end))
+    drift = start.median / end.median - 1.0          # the end's rate over the start's, less one
+    if spread <= UNSTEADY and abs(drift) <= UNSTEADY:
+        return None
+    return (f"this host's speed moved during the run: CartPole-v1's step time spread {spread:.0%} (interquartile "
+            f"range over median) and its rate changed {drift:+.0%} from the run's start to its end (a steady host: "
+            f"both within {UNSTEADY:.0%}); ratios measured side by side hold, but absolute rates and targets do not "
+            "compare with another run's")
 
 
 def single_thread_environment() -> dict[str, str]:
@@ -81,10 +99,9 @@ def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str 
     if unknown:
         raise ValueError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")
     started = time.perf_counter()
-    reference = cartpole_steps_per_second(40_000 if quick else 200_000)
-    rows = [Row("reference", "Gymnasium CartPole-v1 step via gym.make (pre-sampled actions)",
-                1.0 / reference.median, "steps/s",
-                f"IQR {1 / reference.p75:,.0f}-{1 / reference.p25:,.0f}")]
+    reference_steps = 40_000 if quick else 200_000
+    reference = cartpole_steps_per_second(reference_steps)
+    rows = [reference_row(reference, "")]
     for name in names:
         module, func = SECTIONS[name]
         echo(f"bench: {name} ...")
@@ -93,14 +110,22 @@ def run(quick: bool, out_dir: Path, only: list[str] | None = None, command: str 
             rows += section(quick, reference)
         except ImportError as exc:  # an optional extra is missing: say so instead of failing the run
             rows.append(Row(name, f"skipped: {exc}", float("nan"), "", target="install softenv[all]", ok=None))
+    # timed again at the end: a host whose speed moved during the run is named in the report
+    closing = cartpole_steps_per_second(reference_steps)
+    rows.append(reference_row(closing, ", at the end of the run"))
     elapsed = time.perf_counter() - started
     table = format_table(rows)
     echo(table)
-    advice = blas_advice()
-    if advice:
-        echo(f"warning: {advice}")
-    write_report(rows, out_dir, command, quick, elapsed, table, advice, "perf-gpu" if device == "cuda" else "perf")
+    warnings = {"blas_advice": blas_advice(), "unsteady_host": steadiness(reference, closing)}
+    for text in filter(None, warnings.values()):
+        echo(f"warning: {text}")
+    write_report(rows, out_dir, command, quick, elapsed, table, warnings, "perf-gpu" if device == "cuda" else "perf")
     return rows
+
+
+def reference_row(reference: Timing, when: str) -> Row:
+    return Row("reference", f"Gymnasium CartPole-v1 step via gym.make (pre-sampled actions){when}",
+               1.0 / reference.median, "steps/s", f"IQR {1 / reference.p75:,.0f}-{1 / reference.p25:,.0f}")
 
 
 def format_table(rows: list[Row]) -> str:
@@ -113,18 +138,21 @@ def format_table(rows: list[Row]) -> str:
 
 
 def write_report(rows: list[Row], out_dir: Path, command: str, quick: bool, elapsed: float, table: str,
-                 advice: str | None = None, name: str = "perf") -> None:
+                 warnings: dict[str, str | None] | None = None, name: str = "perf") -> None:
+    """``perf.md`` and ``perf.json`` (or ``name``'s); ``warnings``: each kind's text, or None where none
+    applies (written to the JSON under its kind, and above the table)."""
+    warnings = warnings or {}
     out_dir.mkdir(parents=True, exist_ok=True)
     machine = machine_info()
     stem = f"{name}_quick" if quick else name
     code = code_revision()
     payload = {"command": command, "code": code, "quick": quick, "elapsed_s": elapsed, "machine": machine,
-               "blas_advice": advice, "rows": [r.as_dict() for r in rows]}
+               **warnings, "rows": [r.as_dict() for r in rows]}
     text = [f"# softenv performance{' (quick)' if quick else ''}", "",
             f"Made by `{command}` at {code} in {elapsed:.0f} s. Single thread (BLAS/OpenMP pinned to 1); every time is the "
             "median over repeats, with its interquartile range; CartPole-v1 was measured in the same process.", "",
             "Machine: " + ", ".join(f"{k} {v}" for k, v in machine.items()), "",
-            *([f"Warning: {advice}.", ""] if advice else []), table, ""]
+            *(line for text in warnings.values() if text for line in (f"Warning: {text}.", "")), table, ""]
     # both files or neither: a failed write leaves the old report whole
     atomic_write_all([(out_dir / f"{stem}.json", lambda fh: fh.write(json.dumps(payload, indent=2, default=float) + "\n"),
                        True), (out_dir / f"{stem}.md", lambda fh: fh.write("\n".join(text)), True)])
