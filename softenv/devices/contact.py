@@ -30,7 +30,7 @@ the response's ``lateral`` feature.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -39,6 +39,7 @@ from ..tissue import DESIGN_INDENTATION, AnalyticTissue, TissueParams, effective
 
 TABLE_INTERVALS = 4096
 _LOAD_SPAN = (1e-7, 1e5)        # loads tabulated, as multiples of the design force and of the tissue's own scale
+DEPTH_STEP = 1e-4      # the central difference's relative step in the stiffening depth (the tissue is smooth in it)
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,3 +137,23 @@ class TongueContact:
         i = np.minimum(d * self.inv_step, self.top).astype(np.int64)
         x = d - i * self.step
         return cumulative[i] + self.loads[i] * x + 0.5 * self.slopes[i] * x * x
+
+
+def depth_derivative(contact: TongueContact, tissue: TissueParams, mesh: SphereMesh,
+                     design_force: float) -> tuple[np.ndarray, np.ndarray]:
+    """The analytic stiffening tongue's law ``contact`` in a factor ``q`` on the law's depth, at ``q = 1``:
+    ``dP/dq`` at the law's nodes (N) and its slope on each interval (N/m), by central differences of the
+    tissue's curve at ``q = 1 +- DEPTH_STEP`` read at the law's own nodes. Where a node lies past either
+    curve's end (loads beyond 1e5 times the design force) the derivative holds its last value, and on the
+    interval past the table the wall does not move with the depth."""
+    nodes = np.arange(TABLE_INTERVALS + 1) * contact.step
+    curves = [analytic_curve(replace(tissue, stiffening_depth=tissue.stiffening_depth * q), mesh, design_force)
+              for q in (1 + DEPTH_STEP, 1 - DEPTH_STEP)]
+    plus, minus = (np.interp(nodes, np.r_[0.0, c.depths], np.r_[0.0, c.loads]) for c in curves)
+    loads = (plus - minus) / (2 * DEPTH_STEP)
+    last = int(np.searchsorted(nodes, min(c.depths[-1] for c in curves), side="right")) - 1
+    loads[last + 1:] = loads[last]
+    slopes = np.diff(loads) / contact.step
+    if contact.slopes[-1] != (contact.loads[-1] - contact.loads[-2]) / contact.step:     # the wall took the last slope
+        slopes[-1] = 0.0
+    return loads, slopes

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import _cache
 from ..datasets import ForceShapeData, workspace_dataset
-from ..devices.contact import ContactCurve, analytic_curve
+from ..devices.contact import DEPTH_STEP, ContactCurve, analytic_curve
 from ..fem.params import FEParams
 from ..fem.scene_data import RAMP_STEPS, FERequest, FESceneData
 from ..fem.store import scene_data
@@ -107,9 +107,6 @@ def degrees_to_features(commands: Any, radius: float) -> np.ndarray:
     out = np.array(commands, dtype=np.float64)
     out[..., :2] = radius * np.deg2rad(out[..., :2])
     return out
-
-
-DEPTH_STEP = 1e-4      # the central difference's relative step in the stiffening depth (the tissue is smooth in it)
 
 
 def depth_sensitivity(scene: Scene) -> TabulatedResponse:

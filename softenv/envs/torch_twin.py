@@ -295,11 +295,13 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         * ``target_shift`` ``(n, k)``: added to every step's target shape parameters: the reward, its
           reference distance and the observation follow the shifted target; the normalized score's anchors
           stay the drawn target's.
-        * ``stiffening_depth`` ``(n,)`` (the analytic tongue's stiffening law, ideal device): the law's depth
-          over the scene's. The response is taken to first order in it, ``b(F) + (q - 1) db/dq(F)``, from a
-          table of ``db/dq`` by central differences of the analytic tissue
-          (:func:`~softenv.envs.scene.depth_sensitivity`, built on first use): its gradient is the tissue's at
-          the scene's depth; away from it the response is that linear model's (its bias: docs/gradients.md).
+        * ``stiffening_depth`` ``(n,)`` (the analytic tongue's stiffening law): the law's depth over the
+          scene's. The response is taken to first order in it, ``b(F) + (q - 1) db/dq(F)``, from a table of
+          ``db/dq`` by central differences of the analytic tissue
+          (:func:`~softenv.envs.scene.depth_sensitivity`, built on first use), and on the laryngoscope the
+          tongue's contact law too (:func:`~softenv.devices.contact.depth_derivative`, in the Warp kernel):
+          its gradient is the tissue's at the scene's depth; away from it the step is that linear model's
+          (its bias: docs/gradients.md).
 
         They stay across ``reset()`` and ``detach()`` (they are not state); a later ``backward()`` leaves
         each one's gradient in its ``.grad``, and moving one in place under ``torch.no_grad()`` moves the
@@ -329,13 +331,12 @@ class SoftSphereTorchVectorEnv(VectorEnv):
     def scene_params(self) -> tuple[str, ...]:
         """The scene parameters :meth:`track_params` offers here: the target's shift, those the device's
         step carries (``DeviceTensors.scene_params``; none for a kind written before the contract had it),
-        and the stiffening law's depth where the ideal device presses an analytic tongue on that law (on the
-        laryngoscope the depth would also move the tongue's contact law in its kernel, which has no
-        sensitivity to it)."""
+        and the stiffening law's depth where the tongue is analytic on that law (the response's; a device
+        that carries it too moves its own law with it: the laryngoscope's contact)."""
         scene = self.world.scene
-        law = (("stiffening_depth",) if self.world.device_kind.name == "ideal" and scene.fe is None
-               and scene.tissue.law == "stiffening" else ())
-        return ("target_shift", *getattr(self._device, "scene_params", ()), *law)
+        law = ("stiffening_depth",) if scene.fe is None and scene.tissue.law == "stiffening" else ()
+        carried = (name for name in getattr(self._device, "scene_params", ()) if name not in law)
+        return ("target_shift", *carried, *law)
 
     def _stiffened(self, f: torch.Tensor) -> torch.Tensor:
         """The force features at which a tongue ``tissue_stiffness`` times as stiff responds as the scene's."""

@@ -44,9 +44,11 @@ from ...sections import SceneConfig
 
 SPRING_LENGTH = 1.0           # m, rest length of the two coupling springs
 # the scene parameters a kernel reads per device (its engine's ``scene_params`` columns), which the torch
-# twin can track for gradients: each a value of this class but the tongue's stiffness, a factor on the scene's
+# twin can track for gradients: each a value of this class but the tongue's stiffness and the stiffening
+# law's depth, factors on the scene's
 SCENE_COLUMNS = ("coupling_stiffness", "coupling_damping", "tissue_stiffness", "rotational_stiffness",
-                 "rotational_damping")
+                 "rotational_damping", "stiffening_depth")
+FACTOR_COLUMNS = ("tissue_stiffness", "stiffening_depth")
 START_GAP = 0.005             # m between the blade's underside and the tongue at the start
 INCISOR_RADIUS = 0.004        # m
 SHAPE_FRICTION = 0.3          # of the blade's and the incisors' shapes (pymunk's contact takes their product)

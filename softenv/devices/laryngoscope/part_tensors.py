@@ -9,6 +9,7 @@ from typing import Any
 import torch
 
 from ..base import Config, DeviceScene
+from ..contact import depth_derivative
 from . import BATCH_ENGINES, LARYNGOSCOPE_OBS
 from .params import SCENE_COLUMNS
 from .part import INFO_KEYS, batch_report, in_workspace, laryngoscope_parts
@@ -50,11 +51,14 @@ class LaryngoscopeTensorPart:
     obs_names = LARYNGOSCOPE_OBS
     info_keys = INFO_KEYS
     episode_info_keys: tuple[str, ...] = ()
-    scene_params: tuple[str, ...] = SCENE_COLUMNS      # what its kernel reads per device (warp_kernel.scene_row)
 
     def __init__(self, scene: DeviceScene, config: Config, n: int, torch_device: torch.device,
                  dtype: torch.dtype) -> None:
         self._engine_name, self._parts = config["device"]["batch_engine"], laryngoscope_parts(scene, config)
+        self._scene, self._design_force = scene, config["device"]["max_normal_force"]
+        # what its kernel reads per device (warp_kernel.scene_row); a depth only on the analytic stiffening tongue
+        stiffening = config["tissue"]["model"] == "analytic" and scene.tissue.law == "stiffening"
+        self.scene_params = tuple(n for n in SCENE_COLUMNS if stiffening or n != "stiffening_depth")
         self._use(tensor_engine(self._engine_name, torch_device), n, torch_device)
         self.dtype = dtype
         t = self.laryngoscopes._array
@@ -77,7 +81,7 @@ class LaryngoscopeTensorPart:
         dev = self.laryngoscopes
         if self._factors:                  # tracked scene parameters: the kernel's columns times their factors
             ones = torch.ones(dev.n, dtype=torch.float64, device=dev.torch_device)
-            factors = [self._factors.get(name, ones).to(torch.float64) for name in self.scene_params]
+            factors = [self._factors.get(name, ones).to(torch.float64) for name in SCENE_COLUMNS]
             dev.scene_params = self._scene_defaults * torch.stack(factors, dim=1)
         dev.control_step(actions.to(torch.float64), moving=stepped)
         features, touching = dev.features()
@@ -116,8 +120,13 @@ class LaryngoscopeTensorPart:
         return self.laryngoscopes.track_state()
 
     def use_params(self, params: dict[str, torch.Tensor]) -> None:
-        """The coupling's stiffness and damping, the tongue's stiffness (its load table and lateral grip) and
-        the wrist's rotary stiffness and damping as factors on the kernel's scene parameters (the Warp
+        """The coupling's stiffness and damping, the tongue's stiffness (its load table and lateral grip),
+        the wrist's rotary stiffness and damping, and the stiffening law's depth (its load table to first
+        order, :func:`~..contact.depth_derivative`) as factors on the kernel's scene parameters (the Warp
         engine's, which :meth:`differentiable` sets)."""
         self._scene_defaults = self.laryngoscopes.scene_params.detach().clone()
         self._factors = {name: x for name, x in params.items() if name in self.scene_params}
+        if "stiffening_depth" in self._factors:
+            scene = self._scene
+            self.laryngoscopes.use_depth_derivative(*depth_derivative(self._parts[1], scene.tissue, scene.mesh,
+                                                                      self._design_force))

@@ -31,13 +31,19 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
     _STATE = ("_blade", "_hand", "_lateral", "_contact", "_incisor", "_hand_v")     # what a step reads from the last
     has_adjoint = False         # an engine whose control step torch autograd can follow (Warp's) sets it
     taped = False               # set by the torch twin's differentiable=True: control steps carry the graph
-    scene_params: torch.Tensor  # (n, 5) params.SCENE_COLUMNS of an engine whose kernel reads them (Warp's)
+    scene_params: torch.Tensor  # (n, 6) params.SCENE_COLUMNS of an engine whose kernel reads them (Warp's)
 
     def __init__(self, params: LaryngoscopeParams, contact: TongueContact, n: int,
                  torch_device: torch.device | str = "cpu") -> None:
         self.torch_device = torch.device(torch_device)
         super().__init__(params, contact, n)
 
+
+    def use_depth_derivative(self, loads: Any, slopes: Any) -> None:
+        """The load table's derivative in the stiffening depth's factor, for an engine whose kernel reads the
+        scene parameters (Warp's, which overrides this); the others cannot move their table."""
+        raise ValueError(f"{type(self).__name__} does not read scene parameters; the stiffening depth's gradient "
+                         "needs Warp's engine (differentiable=True runs it)")
     def _array(self, value: Any) -> torch.Tensor:
         if isinstance(value, torch.Tensor):
             return value.to(self.torch_device)

@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from ..contact import TongueContact
-from .params import SCENE_COLUMNS, LaryngoscopeParams
+from .params import FACTOR_COLUMNS, SCENE_COLUMNS, LaryngoscopeParams
 from .physics import Constants
 from .state import IncisorContact, KernelLaryngoscopes
 from .warp_kernel import MAX_VERTICES, Params, control_period, f64
@@ -51,20 +51,22 @@ def device_params(c: Constants, s: IncisorContact, params: LaryngoscopeParams) -
 
 
 def scene_defaults(params: LaryngoscopeParams, n: int) -> np.ndarray:
-    """The scene parameters ``(n, 5)`` each device's launch reads (:func:`.warp_kernel.scene_row`,
+    """The scene parameters ``(n, 6)`` each device's launch reads (:func:`.warp_kernel.scene_row`,
     :data:`~.params.SCENE_COLUMNS`) as the scene sets them: the coupling's stiffness and damping, the
-    tongue's stiffness factor 1, the wrist's rotary stiffness and damping."""
-    row = [1.0 if name == "tissue_stiffness" else getattr(params, name) for name in SCENE_COLUMNS]
+    tongue's stiffness factor 1, the wrist's rotary stiffness and damping, the depth factor 1."""
+    row = [1.0 if name in FACTOR_COLUMNS else getattr(params, name) for name in SCENE_COLUMNS]
     return np.tile(row, (n, 1)).astype(np.float64)
 
 
 def kernel_constants(dev: KernelLaryngoscopes, device: Any) -> list[Any]:
     """What every launch for the devices ``dev`` reads, on Warp's ``device``: the constants, the tongue's
-    load table and the blade's polygon (:func:`control_period`'s and :func:`one_substep`'s last arguments)."""
+    load table and its derivative in the stiffening depth's factor (0 until
+    :meth:`~.warp_tensors.LaryngoscopeWarpTensors.use_depth_derivative` replaces it), and the blade's
+    polygon (:func:`control_period`'s and :func:`one_substep`'s last arguments)."""
     s, contact = dev.incisors, dev.contact
     return [device_params(dev.c, s, dev.params),
-            wp.array(np.asarray(contact.loads, dtype=np.float64), dtype=f64, device=device),
-            wp.array(np.asarray(contact.slopes, dtype=np.float64), dtype=f64, device=device),
+            *(wp.array(np.asarray(x, dtype=np.float64), dtype=f64, device=device)
+              for x in (contact.loads, contact.slopes, np.zeros_like(contact.loads), np.zeros_like(contact.slopes))),
             wp.array(s.local, dtype=wp.vec2d, device=device),
             wp.array(s.local_normals, dtype=wp.vec2d, device=device)]
 

@@ -498,14 +498,17 @@ def action_of(actions: wp.array2d(dtype=f64), i: int) -> wp.vec4d:
 
 @wp.func
 def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array(dtype=f64),
-            slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
+            slopes: wp.array(dtype=f64), d_loads: wp.array(dtype=f64), d_slopes: wp.array(dtype=f64),
+            local: wp.array(dtype=wp.vec2d), local_normals: wp.array(dtype=wp.vec2d)) -> Device:
     """One substep of one device: the hand's clipped velocity, the tongue's force, then Chipmunk's step of
     the coupled blade against the incisors (``cpSpaceStep``). ``tune`` is the device's row of the scene
     parameters (:func:`scene_row`): the coupling's stiffness and damping, the factor on the tongue's
-    stiffness (its load table and lateral grip), and the wrist's rotary stiffness and damping."""
+    stiffness (its load table and lateral grip), the wrist's rotary stiffness and damping, and the factor
+    ``q`` on the stiffening law's depth, which moves the load table to first order along ``d_loads`` and
+    ``d_slopes`` (its derivative in ``q``; at ``q = 1`` the table is the scene's bit for bit)."""
     h = p.h
     k_c, c_c, s_t = tune[0], tune[1], tune[2]
-    k_rot, c_rot, w_coef = tune[3], tune[4], tune[5]
+    k_rot, c_rot, dq, w_coef = tune[3], tune[4], tune[5] - ONE, tune[6]
     m_inv, i_inv = p.inv_m, p.inv_I
     px, py, a, ca, sa, vx, vy, w = f64(d.px), f64(d.py), f64(d.a), f64(d.ca), f64(d.sa), f64(d.vx), f64(d.vy), f64(d.w)
     gx, gy, pitch = f64(d.gx), f64(d.gy), f64(d.pitch)
@@ -536,9 +539,10 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
         rn = rx * ny - ry * nx
         inv_meff = p.inv_m + rn * rn * p.inv_I
         i = table_index(max0(depth) * p.inv_step, p.top)
-        slope = s_t * slopes[i]
-        law = s_t * loads[i] + (depth - f64(i) * p.step) * slope
-        ahead = s_t * slopes[table_index(max0(depth + h * approach) * p.inv_step, p.top)]
+        slope = s_t * (slopes[i] + dq * d_slopes[i])
+        law = s_t * (loads[i] + dq * d_loads[i]) + (depth - f64(i) * p.step) * slope
+        k = table_index(max0(depth + h * approach) * p.inv_step, p.top)
+        ahead = s_t * (slopes[k] + dq * d_slopes[k])
         if ahead > slope:
             slope = ahead
         excess = max0(slope - p.k_ref)
@@ -754,10 +758,12 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
 def scene_row(scene: wp.array2d(dtype=f64), i: int, p: Params) -> Tune:
     """Device ``i``'s scene parameters (:data:`~.params.SCENE_COLUMNS`): the coupling's stiffness (N/m) and damping
     (N s/m), the factor on the tongue's stiffness (1: the scene's), the wrist's rotary stiffness (N m/rad)
-    and damping (N m s/rad); then the wrist damper's velocity coefficient, 1 - exp(-c_rot h / I), as
-    Chipmunk's damped rotary spring computes it (the same roundings: it equals pymunk bit for bit)."""
+    and damping (N m s/rad), the factor on the stiffening law's depth (1: the scene's); then the wrist
+    damper's velocity coefficient, 1 - exp(-c_rot h / I), as Chipmunk's damped rotary spring computes it
+    (the same roundings: it equals pymunk bit for bit)."""
     c_rot = scene[i, 4]
-    return Tune(scene[i, 0], scene[i, 1], scene[i, 2], scene[i, 3], c_rot, ONE - wp.exp(-c_rot * p.h * p.inv_I))
+    return Tune(scene[i, 0], scene[i, 1], scene[i, 2], scene[i, 3], c_rot, scene[i, 5],
+                ONE - wp.exp(-c_rot * p.h * p.inv_I))
 
 
 @wp.func
@@ -818,8 +824,8 @@ def finish(d: Device, count: int, p: Params, blade: wp.array2d(dtype=f64), hand:
 def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), lateral: wp.array2d(dtype=f64),
                    hand_v: wp.array2d(dtype=f64), contact: wp.array2d(dtype=f64), incisor: wp.array(dtype=f64),
                    actions: wp.array2d(dtype=f64), scene: wp.array2d(dtype=f64), count: int, p: Params,
-                   loads: wp.array(dtype=f64),
-                   slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
+                   loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), d_loads: wp.array(dtype=f64),
+                   d_slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
                    local_normals: wp.array(dtype=wp.vec2d)):
     """``count`` substeps of device ``i`` (its rows of the state arrays, updated in place), its hand
     commanded by ``actions[i]`` (normalised, in the hand's frame at the period's start), with its row of
@@ -829,7 +835,7 @@ def control_period(blade: wp.array2d(dtype=f64), hand: wp.array2d(dtype=f64), la
     order = hand_command(action_of(actions, i), d.pitch, p)
     tune = scene_row(scene, i, p)
     for _ in range(count):
-        d = substep(d, p, tune, order, loads, slopes, local, local_normals)
+        d = substep(d, p, tune, order, loads, slopes, d_loads, d_slopes, local, local_normals)
     finish(d, count, p, blade, hand, lateral, hand_v, contact, incisor, i)
 
 
@@ -856,9 +862,11 @@ def close_period(devices: wp.array(dtype=Device), count: int, p: Params, blade: 
 
 @wp.kernel(module="unique", module_options={"fuse_fp": False})
 def one_substep(before: wp.array(dtype=Device), command: wp.array(dtype=wp.vec4d), scene: wp.array2d(dtype=f64),
-                p: Params, loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
+                p: Params, loads: wp.array(dtype=f64), slopes: wp.array(dtype=f64), d_loads: wp.array(dtype=f64),
+                d_slopes: wp.array(dtype=f64), local: wp.array(dtype=wp.vec2d),
                 local_normals: wp.array(dtype=wp.vec2d), after: wp.array(dtype=Device)):
     """One substep of device ``i`` from ``before`` into ``after``: a launch a substep, so that a
     :class:`warp.Tape` keeps every intermediate state for the adjoint."""
     i = wp.tid()
-    after[i] = substep(before[i], p, scene_row(scene, i, p), command[i], loads, slopes, local, local_normals)
+    after[i] = substep(before[i], p, scene_row(scene, i, p), command[i], loads, slopes, d_loads, d_slopes, local,
+                       local_normals)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import torch
 import warp as wp
 
@@ -30,7 +31,13 @@ class LaryngoscopeWarpTensors(LaryngoscopeTensors):
         super().__init__(params, contact, n, torch_device)
         self._warp_device = wp.device_from_torch(self.torch_device)
         self._constants = kernel_constants(self, self._warp_device)
-        self.scene_params = self._array(scene_defaults(params, n))     # (n, 5): scene_row's; a taped step may track it
+        self.scene_params = self._array(scene_defaults(params, n))     # (n, 6): scene_row's; a taped step may track it
+
+    def use_depth_derivative(self, loads: Any, slopes: Any) -> None:
+        """The tongue's load table's derivative in the stiffening depth's factor (:func:`~..contact.depth_derivative`),
+        along which a factor other than 1 in the scene parameters moves the table; until this call it is 0."""
+        self._constants[3:5] = [wp.array(np.asarray(x, dtype=np.float64), dtype=f64, device=self._warp_device)
+                                for x in (loads, slopes)]
 
     def control_step(self, actions: Any, moving: Any = None) -> None:
         """Advance one control period; ``actions`` ``(n, 4)`` in [-1, 1]; rows outside ``moving`` hold
@@ -118,7 +125,7 @@ def differentiable_rollout(engine: LaryngoscopeWarpTensors, blade: torch.Tensor,
     ``lateral`` ``(n, 4)`` (as :class:`~.state.DeviceState` holds them), with ``actions`` ``(T, n, 4)``
     (normalised, as :meth:`control_step` takes them), as torch autograd sees it: each period's state
     ``(T, n, ...)`` by :data:`ROLLOUT_FIELDS` name, whose gradients reach the start state and the actions
-    through Warp's adjoint of every substep, and to ``scene`` ``(n, 5)`` (the scene parameters of
+    through Warp's adjoint of every substep, and to ``scene`` ``(n, 6)`` (the scene parameters of
     :func:`~.warp_kernel.scene_row`; None: the engine's). It leaves
     ``engine``'s own state as it was. Through the incisors' contact and the clamps (workspace, friction
     cone, the tongue's load table) the gradient is that of the branch each substep took."""
