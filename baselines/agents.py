@@ -173,7 +173,9 @@ def train_agent(algo: str, scene: str, seed: int, out_dir: str | Path, timesteps
     model.set_logger(configure(str(partial / "logs"), formats))
     eval_env = make_training_env(algo, scene, min(eval_episodes, 10), split="test")
     eval_env.seed(seed)                          # else its first reset draws from entropy: the curve would not repeat
-    callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(budget // (10 * n_envs), 1),
+    # ten evaluations over the steps learn() takes: an on-policy algorithm collects whole rollouts (n_steps an env)
+    taken = max(budget, int(params.get("n_steps", 0)) * n_envs)
+    callback = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(taken // (10 * n_envs), 1),
                             log_path=str(partial / "eval"), best_model_save_path=str(partial / "best"), verbose=0)
     began = time.perf_counter()
     try:

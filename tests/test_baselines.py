@@ -91,6 +91,9 @@ def test_her_starts_learning_only_after_every_env_finished_an_episode():
 
 def test_agent_file_is_checked_against_the_scene(tmp_path):
     path = train_agent("ppo", "SoftSphere-v0", 0, tmp_path / "ppo", timesteps=512, progress=False)
+    # a budget under one rollout (16 envs x 128 steps) takes one: evaluated ten times over it, not at every step
+    with np.load(tmp_path / "ppo" / "eval" / "evaluations.npz") as log:
+        assert log["timesteps"].tolist() == [16 * 12 * k for k in range(1, 11)]
     policy = load_agent(path, "SoftSphere-v0")
     obs_size = policy.model.observation_space.shape[0]
     assert policy.predict(np.zeros((3, obs_size), np.float32)).shape == (3, 4)
