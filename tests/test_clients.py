@@ -332,10 +332,12 @@ def test_a_ray_worker_killed_mid_job_is_run_again_by_ray(tmp_path):
 
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     os.environ.pop("RAY_ADDRESS", None)
-    jobs = [Job("a", _square, (3,)), Job("killed", _die_once, (str(tmp_path / "marker"), 7)), Job("b", _square, (4,))]
+    jobs = [Job("a", _square, (3,)), Job("killed", _die_once, (str(tmp_path / "marker"), 7)), Job("b", _square, (4,)),
+            Job("niceness", os.nice, (0,))]
     results = run_jobs(jobs, "ray", 2, retries=1, echo=None)
     assert (tmp_path / "marker").read_text() == "killed"          # its first worker did die
-    assert [r.value for r in results] == [9, 7, 16] and all(r.ok for r in results)
+    # the last: a local instance's workers run at this process's priority (Ray's default niceness is 15)
+    assert [r.value for r in results] == [9, 7, 16, os.nice(0)] and all(r.ok for r in results)
 
 
 def test_softenv_data_over_two_workers_writes_the_same_data_sets(tmp_path, capsys):
