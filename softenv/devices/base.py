@@ -206,7 +206,9 @@ class DeviceTensors(DeviceNames, Protocol):
     def scene_params(self) -> tuple[str, ...]:
         """The scene parameters (the twin's ``track_params()`` names: factors on the scene's values) whose
         effect on this device its step carries; a device on which the tissue's modulus acts only through
-        the response (the twin's own lookup) names ``"tissue_stiffness"`` with nothing to do for it."""
+        the response (the twin's own lookup) names ``"tissue_stiffness"`` with nothing to do for it. The
+        twin decides which of them the scene has: it offers ``"stiffening_depth"`` only where the tongue is
+        analytic on the stiffening law, whatever the device names."""
         ...
 
     def use_params(self, params: dict[str, Any]) -> None:

@@ -335,7 +335,7 @@ class SoftSphereTorchVectorEnv(VectorEnv):
         that carries it too moves its own law with it: the laryngoscope's contact)."""
         scene = self.world.scene
         law = ("stiffening_depth",) if scene.fe is None and scene.tissue.law == "stiffening" else ()
-        carried = (name for name in getattr(self._device, "scene_params", ()) if name not in law)
+        carried = (name for name in getattr(self._device, "scene_params", ()) if name != "stiffening_depth")
         return ("target_shift", *carried, *law)
 
     def _stiffened(self, f: torch.Tensor) -> torch.Tensor:

@@ -56,9 +56,7 @@ class LaryngoscopeTensorPart:
                  dtype: torch.dtype) -> None:
         self._engine_name, self._parts = config["device"]["batch_engine"], laryngoscope_parts(scene, config)
         self._scene, self._design_force = scene, config["device"]["max_normal_force"]
-        # what its kernel reads per device (warp_kernel.scene_row); a depth only on the analytic stiffening tongue
-        stiffening = config["tissue"]["model"] == "analytic" and scene.tissue.law == "stiffening"
-        self.scene_params = tuple(n for n in SCENE_COLUMNS if stiffening or n != "stiffening_depth")
+        self.scene_params = SCENE_COLUMNS   # what its kernel reads per device (warp_kernel.scene_row)
         self._use(tensor_engine(self._engine_name, torch_device), n, torch_device)
         self.dtype = dtype
         t = self.laryngoscopes._array

@@ -38,12 +38,12 @@ class LaryngoscopeTensors(KernelLaryngoscopes):
         self.torch_device = torch.device(torch_device)
         super().__init__(params, contact, n)
 
-
     def use_depth_derivative(self, loads: Any, slopes: Any) -> None:
         """The load table's derivative in the stiffening depth's factor, for an engine whose kernel reads the
         scene parameters (Warp's, which overrides this); the others cannot move their table."""
         raise ValueError(f"{type(self).__name__} does not read scene parameters; the stiffening depth's gradient "
                          "needs Warp's engine (differentiable=True runs it)")
+
     def _array(self, value: Any) -> torch.Tensor:
         if isinstance(value, torch.Tensor):
             return value.to(self.torch_device)
