@@ -41,6 +41,25 @@ except ImportError:  # pragma: no cover
 TRIED: "collections.Counter[str]" = collections.Counter()
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False          # pytest-xdist deals the files in the order below
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Files holding a ``slow`` test first, then the rest by their number of tests (pytest-xdist's own order,
+    which it keeps to when told not to reorder): with ``--dist loadfile`` a long file dealt last runs alone
+    at the end (about 90 s of a 2-core run, measured from a run's JUnit times)."""
+    by_file: dict[object, list[pytest.Item]] = {}
+    for item in items:
+        by_file.setdefault(item.path, []).append(item)
+
+    def order(tests: list[pytest.Item]) -> tuple[bool, int]:
+        return not any(t.get_closest_marker("slow") for t in tests), -len(tests)
+
+    items[:] = [item for tests in sorted(by_file.values(), key=order) for item in tests]
+
+
 def pytest_unconfigure(config: pytest.Config) -> None:
     if _OWNS_CACHE:
         shutil.rmtree(_CACHE, ignore_errors=True)

@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="follows processes through Linux /proc")
 def test_compare_stopped_by_sigkill_or_sigterm_resumes_to_the_same_table(tmp_path):
     done = subprocess.run([sys.executable, "scripts/fault_tolerance.py", "--smoke", "--out", str(tmp_path),

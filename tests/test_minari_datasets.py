@@ -36,6 +36,7 @@ def made(store: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any
                                   echo=lambda line: None, show_progress=False) for kind in md.KINDS}
 
 
+@pytest.mark.slow
 def test_every_kind_loads_through_minari_by_its_versioned_id(made: dict[str, Any]) -> None:
     assert {name for name in minari.list_local_datasets() if name.startswith("softenv/")} == \
         {f"softenv/{SCENE}/{kind}-v0" for kind in md.KINDS}

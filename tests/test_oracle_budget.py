@@ -10,10 +10,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow
 def test_the_budget_curve_meets_the_shipped_anchor_at_the_shipped_budget(tmp_path: Path) -> None:
     done = subprocess.run([sys.executable, "scripts/oracle_budget.py", "--out", str(tmp_path), "--episodes", "2",
                            "--iterations", "121", "--scenes", "SoftSphereHaptic-v0"],

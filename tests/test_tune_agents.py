@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -24,6 +25,7 @@ def _tune(tmp_path: Path, trials: int, *more: str) -> subprocess.CompletedProces
                           cwd=ROOT, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow
 def test_a_search_resumes_and_writes_the_best_trial(tmp_path: Path) -> None:
     first = _tune(tmp_path, 2)
     assert first.returncode == 0, first.stderr[-2000:]
