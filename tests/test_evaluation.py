@@ -2,6 +2,9 @@
 
 import json
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -54,6 +57,31 @@ def test_another_scenes_file_is_never_used(tmp_path, monkeypatch):
     (tmp_path / "SoftSphere-v0.json").write_text(json.dumps({**record, "zero": record["zero"][:3]}))
     with pytest.raises(ValueError, match="100 seeds, 3 zero"):
         read_anchors(tmp_path / "SoftSphere-v0.json", "SoftSphere-v0")
+
+
+def test_the_anchors_script_resumes_a_stopped_run_to_the_shipped_numbers(tmp_path):
+    """``scripts/make_anchors.py --runs``: 12 episodes as two jobs (10 and 2), one of them kept in the
+    run store and the other lost; the second run takes the kept one from the store, runs the other, and
+    both runs write the shipped anchors of those episodes."""
+    script = Path(__file__).parent.parent / "scripts" / "make_anchors.py"
+
+    def run(out: str) -> str:
+        done = subprocess.run([sys.executable, str(script), "--scenes", "SoftSphere-v0", "--episodes", "12", "--jobs",
+                               "1", "--runs", str(tmp_path / "runs"), "--out", str(tmp_path / out)],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return done.stdout
+
+    assert "resuming" not in run("first")
+    entries = sorted((tmp_path / "runs" / "jobs").iterdir())
+    assert len(entries) == 2
+    entries[1].unlink()
+    assert "resuming: 1 of 2 jobs" in run("second")
+    first, second = (json.loads((tmp_path / out / "SoftSphere-v0.json").read_text()) for out in ("first", "second"))
+    shipped = json.loads(anchors_module.anchors_file("SoftSphere-v0").read_text())
+    for record in (first, second):
+        assert record["seeds"] == episode_seeds(12)
+        assert record["zero"] == shipped["zero"][:12] and record["oracle_error_sum"] == shipped["oracle_error_sum"][:12]
 
 
 @pytest.fixture(scope="module")
