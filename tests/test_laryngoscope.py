@@ -310,7 +310,7 @@ def test_the_float_kernel_equals_the_ops_kernel_bit_for_bit(sections: dict) -> N
     """``tongue_substep_floats`` (what the single device runs) against ``tongue_substep`` with
     ``ScalarOps`` (its source) on 20,000 random states: blades clear of the tongue, touching it and pressed
     deep into its barrier and wall (past the table's last node), levelled and tipped, still and fast,
-    stuck and sliding sideways. Every output is the same float, bit for bit (the sign of zero included)."""
+    stuck and sliding sideways, clear of the incisors and levered on them. Every output is the same float, bit for bit (the sign of zero included)."""
     import struct
 
     from softenv._ops import ScalarOps
@@ -328,7 +328,8 @@ def test_the_float_kernel_equals_the_ops_kernel_bit_for_bit(sections: dict) -> N
         hand = (*(np.array(blade[:2]) + rng.normal(0.0, 0.01, 2) + dev.params.grip), a + rng.normal(0.0, 0.1),
                 *rng.normal(0.0, 0.2, 3))
         lateral = tuple(rng.normal(0.0, 0.01, 4))
-        args = (blade, hand, lateral, rng.normal(0.0, 0.1), loads, slopes, c)
+        teeth = (0.0, 0.0, 0.0) if rng.random() < 0.5 else (*rng.normal(0.0, 20.0, 2), rng.normal(0.0, 2.0))
+        args = (blade, hand, lateral, rng.normal(0.0, 0.1), teeth, loads, slopes, c)
         ours, source = tongue_substep_floats(*args), tongue_substep(*args, ScalarOps)
         assert [struct.pack("<d", float(x)) for x in ours] == [struct.pack("<d", float(x)) for x in source], args
         touched += source[3] > 0

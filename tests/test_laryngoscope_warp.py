@@ -1,6 +1,6 @@
 """The laryngoscope's Warp kernel (softenv.devices.laryngoscope.warp_kernel) against pymunk itself: every
 device of a batch, on numpy arrays and on torch's CPU tensors, equals a single pymunk device bit for bit
-over whole rollouts; its collision finds what Chipmunk's own (cpShapesCollide) finds, bit for bit; and its
+over whole rollouts (levered on the incisors too); its collision finds what Chipmunk's own (cpShapesCollide) finds, bit for bit; and its
 gradients, bridged to torch autograd, match central differences on smooth stretches."""
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ import warp as wp
 from pymunk._chipmunk import lib
 
 from softenv.devices.laryngoscope import warp_kernel as K
+from softenv.devices.laryngoscope.batch import LaryngoscopeBatch
+from softenv.devices.laryngoscope.physics import hand_action
 from softenv.devices.laryngoscope.warp_arrays import LaryngoscopeWarp
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
@@ -219,3 +221,47 @@ def test_gradients_through_the_warp_kernel_match_central_differences(stretch):
         scale = np.abs(numeric).max()
         assert scale > 0
         np.testing.assert_allclose(tensor.grad.numpy(), numeric, rtol=0, atol=1e-6 * scale)
+
+
+def _lever_actions(single: Laryngoscope, target: float, periods: int, held: int) -> list[list[float]]:
+    """Turn the hand about the incisal edge, tip down, until the tongue's normal force is ``target`` (N),
+    for ``periods`` control periods, then hold still for ``held``: the blade levered on the teeth."""
+    p = single.params
+    ix, iy = p.incisor
+    actions = []
+    for period in range(periods + held):
+        gx, gy, pitch, _ = single.hand_pose
+        spin = float(np.clip(0.025 * (target - single.normal_force), -p.max_pitch_rate, p.max_pitch_rate))
+        rx, ry = gx - ix, gy - (iy - INCISOR_RADIUS)
+        action = list(hand_action(-spin * ry, spin * rx, spin, 0.0, pitch, p)) if period < periods else [0.0] * 4
+        actions.append(np.clip(action, -1.0, 1.0).tolist())
+        single.control_step(actions[-1])
+    return actions
+
+
+def test_a_blade_levered_on_the_incisors_presses_the_tongue_by_its_law_in_every_engine():
+    """Levered on the incisors to 30 N and held, the tongue's normal force is its contact law at the
+    blade's depth (within 0.2 %): the stiff contact's implicit barrier predicts the incisors' push on the
+    blade as well as the coupling's (predicting the coupling's alone left it 9 % under the law). The
+    pymunk batch and the Warp kernel on numpy arrays and on torch tensors follow the single device bit
+    for bit, so each predicts the teeth's push as the single device does."""
+    parts = _parts({})
+    single = Laryngoscope(*parts)
+    actions = _lever_actions(single, 30.0, 100, 40)
+    depth = single.penetration()
+    law = float(single.contact.load(np.array([depth]))[0])
+    assert single.incisor_force > 20.0 and single.c.k_ref < single.contact.stiffness(depth)   # levered, stiff
+    assert single.normal_force == pytest.approx(law, rel=2e-3) and law > 29.0
+    replay = Laryngoscope(*parts)
+    engines = [LaryngoscopeBatch(*parts, 1), _numpy(parts, 2), _torch(parts, 2)]
+    for action in actions:
+        replay.control_step(action)
+        s = replay.state()
+        for engine in engines:
+            engine.control_step(engine._array(np.array([action] * engine.n)))
+            t = engine.state()
+            for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
+                for i in range(engine.n):
+                    assert np.array_equal(np.asarray(getattr(s, field)[0]), np.asarray(getattr(t, field)[i])), \
+                        (type(engine).__name__, field, i)
+    assert replay.state().contact.tolist() == single.state().contact.tolist()

@@ -14,7 +14,7 @@ import pymunk.batch
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
 from .physics import tongue_substep
-from .space import DeviceSpace
+from .space import DeviceSpace, listen_to_incisors, teeth_on_blade
 from .state import ArrayLaryngoscopes
 
 Vec3 = tuple[Any, Any, Any]       # x, y and angular components, one entry a device
@@ -46,16 +46,25 @@ class LaryngoscopeBatch(ArrayLaryngoscopes):
         self._static_id = np.uint64(self.space.static_body.id)
         self._origin = np.zeros((n, 2, 6))
         self._origin[:, :, :2] = self._space.offsets[:, None, :]
+        # the incisors' force and torque on each blade in the last substep, and in this one (the listener's)
+        self._teeth, self._teeth_next = np.zeros((n, 3)), np.zeros((n, 3))
+        self._device_of = {blade._body: i for i, blade in enumerate(self._space.blades)}
+        self._post_solve = listen_to_incisors(self.space, self._on_incisors)
         self.load_state(self.start_state(n))
 
     @property
     def space(self) -> pymunk.Space:
         return self._space.space
 
+    def _on_incisors(self, arbiter: Any) -> None:
+        blade = arbiter.body_b if arbiter.body_b in self._device_of else arbiter.body_a
+        self._teeth_next[self._device_of[blade]] = teeth_on_blade(arbiter, blade, self.h)
+
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
         xp = self.xp
         self._flush(self._touched)
         self._touched = xp.zeros_like(self._touched)
+        self._teeth[:] = 0.0                              # no contact state crosses a period
         lateral = tuple(self._own(col) for col in self._lateral.T)
         impulse = xp.zeros_like(self._incisor)
         for _ in range(count):
@@ -86,8 +95,10 @@ class LaryngoscopeBatch(ArrayLaryngoscopes):
         ca, sa = ops.cos(a), ops.sin(a)
         fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
             (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-            self._loads, self._slopes, c, ops)
+            tuple(self._teeth.T), self._loads, self._slopes, c, ops)
+        self._teeth_next[:] = 0.0
         self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
+        self._teeth, self._teeth_next = self._teeth_next, self._teeth
         return (lat_y, lat_v, hand_lat, anchor), (hvx, hvy, hw, hl), (P, Q, cx, cy)
 
     def _bodies(self) -> np.ndarray:

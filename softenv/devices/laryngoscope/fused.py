@@ -240,7 +240,7 @@ def _collide(C: tl.constexpr, ca, sa, px, py, V: tl.constexpr):
 
 @triton.jit
 def _tongue(C: tl.constexpr, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
-            lat_y, lat_v, hand_lat, anchor, hl):
+            lat_y, lat_v, hand_lat, anchor, hl, tfx, tfy, ttq):
     """:func:`.physics.tongue_substep_floats` for every device of the program."""
     R, h, inv_m, inv_I, h_over_m = _k(C, 0), _k(C, 1), _k(C, 2), _k(C, 3), _k(C, 4)
     k, cc, k_t, mu, k_ref = _k(C, 5), _k(C, 6), _k(C, 7), _k(C, 8), _k(C, 9)
@@ -279,7 +279,7 @@ def _tongue(C: tl.constexpr, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, g
     Fx = k * (gx - px - qx) + cc * (hvx - vx + w * qy)
     Fy = k * (gy - py - qy) + cc * (hvy - vy - w * qx)
     tau = qx * Fy - qy * Fx + k_rot * (pitch - a) + c_rot * (hw - w)
-    push = -(Fx * nx + Fy * ny) * inv_m - tau * rn * inv_I
+    push = -((Fx + tfx) * nx + (Fy + tfy) * ny) * inv_m - (tau + ttq) * rn * inv_I
     beta = stiff * h * inv_meff
     P = (law + (damping + stiff) * approach + stiff * h * push) / (1.0 + beta)
     P = tl.where(touching, _max0(P), 0.0)             # off the tongue P is 0
@@ -404,6 +404,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
     ex0, ex1, f00, f01, f10, f11 = no, no, none, none, none, none
     jn0, jn1, jt0, jt1 = zero, zero, zero, zero
     bvx, bvy, bw, impulse = zero, zero, zero, zero
+    tfx, tfy, ttq = zero, zero, zero                     # the incisors' push on the blade, last substep
     hvx, hvy, hw, hl, P, Q, cx, cy = zero, zero, zero, zero, zero, zero, zero, zero
     ca, sa = tl.cos(a), tl.sin(a)
     for _ in range(count):
@@ -414,7 +415,7 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         hand_lat = hand_lat + h * hl
         fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
             C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
-            lat_y, lat_v, hand_lat, anchor, hl)
+            lat_y, lat_v, hand_lat, anchor, hl, tfx, tfy, ttq)
         # cpSpaceStep: 1. positions, spending the contact's bias velocities
         gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
         px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
@@ -495,7 +496,20 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         ty = tl.where(ex0, zero + (anx * jt0 + any_ * jn0), zero)
         tx = tl.where(ex1, tx + (anx * jn1 - any_ * jt1), tx)
         ty = tl.where(ex1, ty + (anx * jt1 + any_ * jn1), ty)
-        impulse = tl.where(alive & (ticks == 0), impulse + tl.sqrt(tx * tx + ty * ty), impulse)
+        solved = alive & (ticks == 0)
+        impulse = tl.where(solved, impulse + tl.sqrt(tx * tx + ty * ty), impulse)
+        # the incisors' force and torque on the blade, for the next substep (physics.teeth_force)
+        jx, jy = anx * jn0 - any_ * jt0, anx * jt0 + any_ * jn0
+        tfx = tl.where(ex0, zero + jx, zero)
+        tfy = tl.where(ex0, zero + jy, zero)
+        ttq = tl.where(ex0, zero + (r2x0 * jy - r2y0 * jx), zero)
+        jx, jy = anx * jn1 - any_ * jt1, anx * jt1 + any_ * jn1
+        tfx = tl.where(ex1, tfx + jx, tfx)
+        tfy = tl.where(ex1, tfy + jy, tfy)
+        ttq = tl.where(ex1, ttq + (r2x1 * jy - r2y1 * jx), ttq)
+        tfx = tl.where(solved, tfx / h, zero)
+        tfy = tl.where(solved, tfy / h, zero)
+        ttq = tl.where(solved, ttq / h, zero)
     tl.store(blade + 6 * rows, px, live)
     tl.store(blade + 6 * rows + 1, py, live)
     tl.store(blade + 6 * rows + 2, a, live)

@@ -208,7 +208,8 @@ class LaryngoscopeParams:
         capped where it would add substeps to those that ``max_substep``, the coupling and the lateral
         spring need anyway. The stiffness above it goes to the implicit
         barrier (:func:`tongue_substep`), which is stable at any stiffness and exact at rest, so a
-        stiffer tongue costs no substeps and a held press still settles on the law."""
+        stiffer tongue costs no substeps and a held press still settles on the law (levered on the
+        incisors too: the barrier predicts their push)."""
         k_ref, lateral = contact.reference_stiffness, contact.lateral_stiffness
         count = substep_count(self.dt, self._mode_omega(0.0, lateral), self.max_substep)   # needed without it
         allowed = ACCURACY * count / self.dt

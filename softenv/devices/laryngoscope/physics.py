@@ -39,6 +39,7 @@ from ..contact import TongueContact
 from .params import LaryngoscopeParams
 
 CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
+NO_TEETH = (0.0, 0.0, 0.0)     # the incisors' force and torque on a blade clear of them
 
 
 @dataclass
@@ -96,27 +97,30 @@ def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: P
     return cx, cy, ops.sqrt(cx * cx + cy * cy) + 1e-300
 
 
-def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: Any, slopes: Any, c: Constants,
-                    ops: PhysicsOps) -> tuple[Any, ...]:
+def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, teeth: tuple, loads: Any, slopes: Any,
+                   c: Constants, ops: PhysicsOps) -> tuple[Any, ...]:
     """One substep of the tongue's contact: the arithmetic both devices share (the batch runs it on
     arrays; the single device runs :func:`tongue_substep_floats`, this function written out for floats).
 
     ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
     ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
-    substep at its velocity ``hl``. Returns ``(fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor)``:
-    the tongue's push on the blade and its torque, the normal and sideways force, the contact point,
-    and the lateral state after the substep.
+    substep at its velocity ``hl``, ``teeth`` the incisors' force and torque on the blade in the last
+    substep (:func:`teeth_force`; zeros without that contact). Returns ``(fx, fy, torque, P, Q, cx, cy,
+    lat_y, lat_v, anchor)``: the tongue's push on the blade and its torque, the normal and sideways force,
+    the contact point, and the lateral state after the substep.
 
     **Normal force**, at the blade's point ``(cx, cy)`` nearest the tongue's centre. The law's
     stiffness up to ``K_ref`` is explicit; the excess ``K_ex`` (the steepest slope between here and
     where this substep's approach speed would take the blade), with a critical damper
     ``c_ex = 2 sqrt(K_ex m)`` so that the stiff barrier does not ring, is applied by backward Euler
-    along the normal, with the blade's effective mass ``m`` there and the coupling's push predicted
-    from the current state: with ``s = K_ex h + c_ex``,
+    along the normal, with the blade's effective mass ``m`` there and the push of the other forces on
+    the blade predicted: the coupling's from the current state, the incisors' from the last substep
+    (a blade levered on the teeth is pushed by both; predicting the coupling's alone left a levered
+    press 9-13 % under the law). With ``s = K_ex h + c_ex``,
     ``P (1 + s h / m) = P(delta) + (c + s) v + s h a``, where ``v`` is the approach speed and ``a`` the
-    coupling's acceleration of that point into the tongue. At rest ``a = P / m``, so a held press
-    settles exactly on the law, however stiff it is there; the prediction uses forces of this instant
-    (not the last contact force), so it does not feed energy back.
+    acceleration those forces give that point into the tongue. At rest ``a = P / m``, so a held press
+    settles exactly on the law, however stiff it is there, levered on the teeth or not; the prediction
+    leaves out the tongue's own last force, so it does not feed energy back.
 
     **Lateral**: the blade's lateral mass between the hand's spring-damper and the tongue's
     stick-slip grip, as pymunk integrates its springs: explicit springs, implicit damping, then the
@@ -145,10 +149,11 @@ def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: An
         excess = ops.positive(slope - c.k_ref)
         # the excess spring, critically damped, both implicit: K_ex h + c_ex, with c_ex = 2 sqrt(K_ex m)
         stiff = excess * c.h + 2.0 * ops.sqrt(excess / inv_meff)
-        # the coupling's acceleration of the contact point into the tongue, predicted from this instant
-        # (where stiff = 0 it is multiplied by 0)
+        # the acceleration of the contact point into the tongue by the coupling (this instant) and the
+        # incisors (the last substep); where stiff = 0 it is multiplied by 0
         Fx, Fy, tau = coupling_force(blade, hand, c)
-        push = -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
+        Tx, Ty, Tt = teeth
+        push = -((Fx + Tx) * nx + (Fy + Ty) * ny) * c.inv_m - (tau + Tt) * rn * c.inv_I
         beta = stiff * c.h * inv_meff
         P = ops.positive((law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)) * touching
         fx = P * nx
@@ -165,8 +170,8 @@ def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, loads: An
     return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
 
 
-def tongue_substep_floats(blade: tuple, hand: tuple, lateral: tuple, hl: float, loads: list[float],
-                          slopes: list[float], c: Constants) -> tuple[float, ...]:
+def tongue_substep_floats(blade: tuple, hand: tuple, lateral: tuple, hl: float, teeth: tuple[float, float, float],
+                          loads: list[float], slopes: list[float], c: Constants) -> tuple[float, ...]:
     """:func:`tongue_substep` on Python floats with ``ScalarOps``, written out: the same operations in the
     same order, with the ops and the helpers (:func:`nearest_point`, :func:`coupling_force`) inlined.
     The single device runs it every substep (a third of the step's time went to those calls);
@@ -214,7 +219,8 @@ def tongue_substep_floats(blade: tuple, hand: tuple, lateral: tuple, hl: float, 
         Fx = c.k * (gx - px - qx) + c.c * (hvx - vx + w * qy)
         Fy = c.k * (gy - py - qy) + c.c * (hvy - vy - w * qx)
         tau = qx * Fy - qy * Fx + c.k_rot * (pitch - a) + c.c_rot * (hw - w)
-        push = -(Fx * nx + Fy * ny) * c.inv_m - tau * rn * c.inv_I
+        Tx, Ty, Tt = teeth
+        push = -((Fx + Tx) * nx + (Fy + Ty) * ny) * c.inv_m - (tau + Tt) * rn * c.inv_I
         beta = stiff * c.h * inv_meff
         P = (law + (c.damping + stiff) * approach + stiff * c.h * push) / (1.0 + beta)
         P = P if P > 0.0 else 0.0
@@ -230,6 +236,20 @@ def tongue_substep_floats(blade: tuple, hand: tuple, lateral: tuple, hl: float, 
     Q = -limit if stuck < -limit else (limit if stuck > limit else stuck)
     anchor = ((lat_y - Q / c.k_t) if Q != stuck else anchor) if touching else lat_y
     return fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor
+
+
+def teeth_force(nx: float, ny: float, contacts: list[tuple[float, float, float, float]],
+                h: float) -> tuple[float, float, float]:
+    """The incisors' force ``(x, y)`` and torque on the blade over a substep of ``h`` s, from Chipmunk's
+    arbiter: its normal ``(nx, ny)`` (into the blade) and, for each contact, the offset ``(rx, ry)`` from
+    the blade's centre and the accumulated normal and tangent impulses ``(jn, jt)`` (all that the solver
+    applied this substep: its cached impulse at ``dt_coef = 1`` plus its iterations'). The Warp and
+    Triton kernels write the same sum out."""
+    tx = ty = tq = 0.0
+    for rx, ry, jn, jt in contacts:
+        jx, jy = nx * jn - ny * jt, nx * jt + ny * jn
+        tx, ty, tq = tx + jx, ty + jy, tq + (rx * jy - ry * jx)
+    return tx / h, ty / h, tq / h
 
 
 def grip_offset(cos_a: Any, sin_a: Any, c: Constants) -> tuple[Any, Any]:

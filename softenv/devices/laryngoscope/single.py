@@ -10,14 +10,13 @@ from typing import Any
 
 import numpy as np
 import pymunk
-from pymunk._chipmunk import ffi as _ffi
 from pymunk._chipmunk import lib as _lib
 
 from ..._ops import ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
-from .physics import contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
-from .space import BLADE_TYPE, INCISOR_TYPE, DeviceSpace
+from .physics import NO_TEETH, contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
+from .space import DeviceSpace, listen_to_incisors, teeth_on_blade
 from .state import DeviceState, LaryngoscopeBase
 
 
@@ -31,6 +30,7 @@ class Laryngoscope(LaryngoscopeBase):
     def _rows(*columns: float) -> np.ndarray:
         return np.array([columns])
     _impulse: float                              # the incisors' impulse summed over this period's substeps
+    _teeth: tuple[float, float, float]           # their force and torque on the blade in the last substep
     _lateral: tuple[float, float, float, float]  # blade y, blade vy, hand y, anchor
     _hand_pose: tuple[float, float, float]       # grip x, y, pitch
 
@@ -41,38 +41,20 @@ class Laryngoscope(LaryngoscopeBase):
         self._chand, self._cblade, self._cspace = self._hand._body, self._blade._body, self.space._space
         self._loads, self._slopes = contact.loads_list, contact.slopes_list
         self._touched = False
-        self._listen_to_incisors()
+        self._teeth = NO_TEETH
+        self._post_solve = listen_to_incisors(self.space, self._on_incisors)
         self.reset()
 
     @property
     def space(self) -> pymunk.Space:
         return self._space.space
 
-    def _listen_to_incisors(self) -> None:
-        """Sum ``|total_impulse|`` of the blade's contact with the incisors after each substep's solve.
-
-        pymunk's post-solve handler builds an ``Arbiter`` and looks up its data on every call (2.4 us,
-        a third of a substep); a cffi callback straight on Chipmunk's handler reads the impulse in
-        0.5 us. Where the platform refuses write+execute memory for cffi callbacks (hardened
-        runtimes), pymunk's handler does the same sum.
-        """
-        self.space.on_collision(BLADE_TYPE, INCISOR_TYPE, post_solve=self._on_incisor)
-        total_impulse = _lib.cpArbiterTotalImpulse
-
-        def post_solve(arbiter: Any, space: Any, data: Any) -> None:
-            j = total_impulse(arbiter)
-            self._impulse += math.sqrt(j.x * j.x + j.y * j.y)
-            self._touched = True
-
-        try:
-            self._post_solve = _ffi.callback("void(cpArbiter *, cpSpace *, cpDataPointer)", post_solve)
-        except (MemoryError, RuntimeError):        # pragma: no cover - platform dependent
-            return
-        self.space._handlers[(BLADE_TYPE, INCISOR_TYPE)]._handler.postSolveFunc = self._post_solve
-
-    def _on_incisor(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
-        jx, jy = arbiter.total_impulse
-        self._impulse += math.sqrt(jx * jx + jy * jy)
+    def _on_incisors(self, arbiter: Any) -> None:
+        """After a substep's solve: add the incisors' ``|total_impulse|`` to the period's sum and keep
+        their force and torque on the blade for the next substep's tongue contact."""
+        j = _lib.cpArbiterTotalImpulse(arbiter)
+        self._impulse += math.sqrt(j.x * j.x + j.y * j.y)
+        self._teeth = teeth_on_blade(arbiter, self._cblade, self.c.h)
         self._touched = True
 
     def reset(self) -> None:
@@ -111,6 +93,7 @@ class Laryngoscope(LaryngoscopeBase):
         hvx, hvy, hw, hl = vX, vY, spin, v_lat
         written = None
         self._impulse = 0.0
+        self._teeth = NO_TEETH
         self._space.space._locked = True                    # as pymunk's Space.step does around the C step
         try:
             for _ in range(count):
@@ -132,7 +115,7 @@ class Laryngoscope(LaryngoscopeBase):
                 ca, sa = cos(a), sin(a)
                 fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep_floats(
                     (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-                    loads, slopes, c)
+                    self._teeth, loads, slopes, c)
                 if P != 0.0:                                # off the tongue Chipmunk's reset force of 0 stands
                     set_force(blade, (fx, fy))
                     set_torque(blade, torque)
@@ -140,6 +123,7 @@ class Laryngoscope(LaryngoscopeBase):
                     written = (hvx, hvy, hw)
                     _lib.cpBodySetVelocity(hand, (hvx, hvy))
                     _lib.cpBodySetAngularVelocity(hand, hw)
+                self._teeth = NO_TEETH                      # unless the incisors' callback sets it
                 step(space, h)
                 gx, gy, pitch = gx + (hvx + 0.0) * h, gy + (hvy + 0.0) * h, pitch + (hw + 0.0) * h
         finally:

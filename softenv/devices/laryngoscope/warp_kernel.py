@@ -92,8 +92,8 @@ Tune = wp.types.vector(length=len(SCENE_COLUMNS) + 1, dtype=f64)
 @wp.struct
 class Device:
     """One device's state within a control period: blade (position, angle, velocity), hand, lateral
-    spring, hand velocity, tongue contact, the blade's bias velocity, the incisors' arbiter and the
-    period's summed incisor impulse."""
+    spring, hand velocity, tongue contact, the blade's bias velocity, the incisors' arbiter, the
+    period's summed incisor impulse and the incisors' force and torque on the blade in the last substep."""
 
     px: f64
     py: f64
@@ -130,6 +130,9 @@ class Device:
     jn: wp.vec2d
     jt: wp.vec2d
     impulse: f64
+    tfx: f64
+    tfy: f64
+    ttq: f64
 
 
 @wp.func
@@ -551,7 +554,7 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
         Fx = k_c * (gx - px - qx) + c_c * (hvx - vx + w * qy)
         Fy = k_c * (gy - py - qy) + c_c * (hvy - vy - w * qx)
         tau = qx * Fy - qy * Fx + k_rot * (pitch - a) + c_rot * (hw - w)
-        push = -(Fx * nx + Fy * ny) * p.inv_m - tau * rn * p.inv_I
+        push = -((Fx + d.tfx) * nx + (Fy + d.tfy) * ny) * p.inv_m - (tau + d.ttq) * rn * p.inv_I
         beta = stiff * h * inv_meff
         P = max0((law + (p.damping + stiff) * approach + stiff * h * push) / (ONE + beta))
         fx = P * nx
@@ -709,12 +712,19 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
         j_rot = j_rot - j
         w = w - j * i_inv
     impulse = f64(d.impulse)
+    tfx, tfy, ttq = f64(0.0), f64(0.0), f64(0.0)
     if alive == 1 and ticks == 0:                        # cpArbiterTotalImpulse
         tx, ty = f64(0.0), f64(0.0)
         for s in range(2):
             if ex[s] == 1:
                 tx, ty = tx + (anx * jn[s] - any_ * jt[s]), ty + (anx * jt[s] + any_ * jn[s])
         impulse = impulse + root(tx * tx + ty * ty)
+        # the incisors' force and torque on the blade, for the next substep (physics.teeth_force)
+        for s in range(2):
+            if ex[s] == 1:
+                jx, jy = anx * jn[s] - any_ * jt[s], anx * jt[s] + any_ * jn[s]
+                tfx, tfy, ttq = tfx + jx, tfy + jy, ttq + (r2x[s] * jy - r2y[s] * jx)
+        tfx, tfy, ttq = tfx / h, tfy / h, ttq / h
     out = Device()
     out.px = px
     out.py = py
@@ -751,6 +761,9 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
     out.jn = jn
     out.jt = jt
     out.impulse = impulse
+    out.tfx = tfx
+    out.tfy = tfy
+    out.ttq = ttq
     return out
 
 
