@@ -15,8 +15,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from lever_support import lever_actions  # noqa: E402
+from softenv.devices.laryngoscope.part import laryngoscope_parts  # noqa: E402
 from softenv.devices.laryngoscope.part_tensors import tensor_engine  # noqa: E402
+from softenv.devices.laryngoscope.single import Laryngoscope  # noqa: E402
 from softenv.devices.laryngoscope.warp_tensors import LaryngoscopeWarpTensors  # noqa: E402
+from softenv.envs import HAPTIC_SCENES  # noqa: E402
+from softenv.envs.config import scene_config  # noqa: E402
+from softenv.envs.world import World  # noqa: E402
 
 HAS_TRITON = importlib.util.find_spec("triton") is not None
 
@@ -39,6 +45,7 @@ INTERPRETED = textwrap.dedent("""
     actions = np.random.default_rng(4).uniform(-1, 1, (100, n, 4))
     actions[:24, :, 1] = np.abs(actions[:24, :, 1])          # pressing the tongue
     actions[24:72, :2] = [1.0, 0.0, 0.0, 1.0]                  # two devices inserting, levering on the incisors
+    actions[:, 2:] = np.array(json.loads(sys.argv[2]))[:, None]  # two levered to 30 N on them, then held
     ref, fused = LaryngoscopeWarp(*parts, n), LaryngoscopeFused(*parts, n)
     rollout = []
     for a in actions:
@@ -48,8 +55,10 @@ INTERPRETED = textwrap.dedent("""
     levering = [k for k, r in enumerate(rollout) if (r[3] > 0).any()]
     tongue = [k for k, r in enumerate(rollout) if (r[2].contact[:, 0] > 0).any() and k not in levering]
     hardest = max(levering, key=lambda k: rollout[k][3].max())          # the blade deepest into the incisors
+    # levered on the incisors, the tongue pressed where the barrier predicts the teeth's push
+    levered = [k for k, r in enumerate(rollout) if (r[3][2:] > 0).all() and (r[2].contact[2:, 0] > 25).all()]
     worst = {}
-    for k in sorted({tongue[0], levering[0], hardest, levering[-1], len(rollout) - 1}):
+    for k in sorted({tongue[0], levering[0], hardest, levering[-1], levered[0], len(rollout) - 1}):
         before, a, after, _ = rollout[k]
         fused.load_state(before)
         # the hand's command as the Warp kernel makes it (the C library's cos and sin): the kernels' own arithmetic
@@ -60,8 +69,8 @@ INTERPRETED = textwrap.dedent("""
             x, y = getattr(after, field), getattr(state, field)
             scale = max(float(np.abs(x).max()), 1e-300)
             worst[field] = max(worst.get(field, 0.0), float(np.abs(x - y).max()) / scale)
-    levering, tongue = len(levering), len(tongue)
-    print(json.dumps({"worst": worst, "levering": levering, "tongue": tongue}))
+    levering, tongue, levered = len(levering), len(tongue), len(levered)
+    print(json.dumps({"worst": worst, "levering": levering, "tongue": tongue, "levered": levered}))
 """)
 
 
@@ -77,13 +86,16 @@ def test_the_fused_kernel_steps_as_the_warp_kernel_in_the_interpreter(corner):
     """Triton's interpreter runs the kernel on CPU with numpy's operations, from the Warp kernel's state
     before a period with the Warp kernel's hand command: periods pressing the tongue, the first and last
     levering on the incisors, the one bearing hardest on them (the fast corner's blade sinks into them),
-    and the last; the state within 1e-12 of each field's largest value (numpy's exp, which the interpreter
+    the first with two blades levered on them and pressing the tongue past 25 N, and the last (those two
+    held there); the state within 1e-12 of each field's largest value (numpy's exp, which the interpreter
     calls, may differ from the C library's in the last bit)."""
-    run = subprocess.run([sys.executable, "-c", INTERPRETED, json.dumps(CORNERS[corner])],
+    world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], CORNERS[corner]))
+    lever = lever_actions(Laryngoscope(*laryngoscope_parts(world.scene, world.config)), 30.0, 80, 20)
+    run = subprocess.run([sys.executable, "-c", INTERPRETED, json.dumps(CORNERS[corner]), json.dumps(lever)],
                          env={**os.environ, "TRITON_INTERPRET": "1"}, capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr[-3000:]
     checked = json.loads(run.stdout.strip().splitlines()[-1])
-    assert checked["levering"] >= 3 and checked["tongue"] >= 3, checked
+    assert checked["levering"] >= 3 and checked["tongue"] >= 3 and checked["levered"] >= 10, checked
     assert max(checked["worst"].values()) <= 1e-12, checked
 
 

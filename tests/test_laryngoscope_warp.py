@@ -15,7 +15,6 @@ from pymunk._chipmunk import lib
 
 from softenv.devices.laryngoscope import warp_kernel as K
 from softenv.devices.laryngoscope.batch import LaryngoscopeBatch
-from softenv.devices.laryngoscope.physics import hand_action
 from softenv.devices.laryngoscope.warp_arrays import LaryngoscopeWarp
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
@@ -25,6 +24,8 @@ from softenv.envs import HAPTIC_SCENES
 from softenv.envs.config import scene_config
 from softenv.envs.world import World
 from softenv.training.hand import haptic_config
+
+from lever_support import lever_actions
 
 torch = pytest.importorskip("torch")
 
@@ -223,22 +224,6 @@ def test_gradients_through_the_warp_kernel_match_central_differences(stretch):
         np.testing.assert_allclose(tensor.grad.numpy(), numeric, rtol=0, atol=1e-6 * scale)
 
 
-def _lever_actions(single: Laryngoscope, target: float, periods: int, held: int) -> list[list[float]]:
-    """Turn the hand about the incisal edge, tip down, until the tongue's normal force is ``target`` (N),
-    for ``periods`` control periods, then hold still for ``held``: the blade levered on the teeth."""
-    p = single.params
-    ix, iy = p.incisor
-    actions = []
-    for period in range(periods + held):
-        gx, gy, pitch, _ = single.hand_pose
-        spin = float(np.clip(0.025 * (target - single.normal_force), -p.max_pitch_rate, p.max_pitch_rate))
-        rx, ry = gx - ix, gy - (iy - INCISOR_RADIUS)
-        action = list(hand_action(-spin * ry, spin * rx, spin, 0.0, pitch, p)) if period < periods else [0.0] * 4
-        actions.append(np.clip(action, -1.0, 1.0).tolist())
-        single.control_step(actions[-1])
-    return actions
-
-
 def test_a_blade_levered_on_the_incisors_presses_the_tongue_by_its_law_in_every_engine():
     """Levered on the incisors to 30 N and held, the tongue's normal force is its contact law at the
     blade's depth (within 0.2 %): the stiff contact's implicit barrier predicts the incisors' push on the
@@ -247,7 +232,7 @@ def test_a_blade_levered_on_the_incisors_presses_the_tongue_by_its_law_in_every_
     for bit, so each predicts the teeth's push as the single device does."""
     parts = _parts({})
     single = Laryngoscope(*parts)
-    actions = _lever_actions(single, 30.0, 100, 40)
+    actions = lever_actions(single, 30.0, 100, 40)
     depth = single.penetration()
     law = float(single.contact.load(np.array([depth]))[0])
     assert single.incisor_force > 20.0 and single.c.k_ref < single.contact.stiffness(depth)   # levered, stiff
