@@ -49,7 +49,7 @@ def pytest_configure(config: pytest.Config) -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Files holding a ``slow`` test first, then the rest by their number of tests (pytest-xdist's own order,
     which it keeps to when told not to reorder): with ``--dist loadfile`` a long file dealt last runs alone
-    at the end (about 90 s of a 2-core run, measured from a run's JUnit times)."""
+    at the end (about 90 s of a 2-core run, by scheduling one run's JUnit times both ways)."""
     by_file: dict[object, list[pytest.Item]] = {}
     for item in items:
         by_file.setdefault(item.path, []).append(item)

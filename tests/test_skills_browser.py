@@ -106,7 +106,7 @@ def test_the_demo_dashboard_works_in_a_real_browser(tmp_path):
             browser.close()
     finally:
         process.terminate()
-        process.wait(timeout=30)
+        process.communicate(timeout=30)                # reads and closes its pipe
 
 
 def test_a_token_is_asked_for_once_then_kept_in_a_cookie(tmp_path):
@@ -122,4 +122,4 @@ def test_a_token_is_asked_for_once_then_kept_in_a_cookie(tmp_path):
             browser.close()
     finally:
         process.terminate()
-        process.wait(timeout=30)
+        process.communicate(timeout=30)                # reads and closes its pipe
