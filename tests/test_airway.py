@@ -18,6 +18,8 @@ from softenv.training.scoring import ADVICE, AIRWAY_ADVICE, replay_hand, score_f
 from softenv.training.logs import HAND_LOG, read_log, read_scene, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
+from lever_support import incisor_reach
+
 KEYED = ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task")
 
 
@@ -116,6 +118,23 @@ def test_the_expert_succeeds_on_every_grade_with_its_tongue_force_rising_and_its
         assert r.clinical["peak_incisor_force_N"] == 0.0
         peaks.append(r.clinical["peak_tongue_force_N"])
     assert all(b > a + 2.0 for a, b in zip(peaks, peaks[1:])), peaks
+
+
+def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():
+    """Why the expert's incisor force cannot rise (scripts/incisor_reach.py, docs/airways.md): on the
+    restricted mouth opening, at the family's centre force, the expert's lift reaches views far deeper than
+    the centre with the teeth untouched, and the lever on the incisors, which loads them with tens of newtons,
+    holds the same force at a view within a degree of the lift's deepest; a step past that, the lift fails or
+    touches the teeth."""
+    centre_deg, force = incisor_reach.centre(3)
+    reach = incisor_reach.lift_reach(3, 0.5)
+    deepest, failed = reach["deepest"], reach["first_failed"]
+    assert deepest["insertion_deg"] >= centre_deg + 10.0 and deepest["peak_incisor_N"] == 0.0
+    assert failed is not None and (not failed["reached"] or failed["peak_incisor_N"] > 0.0)
+    lever = incisor_reach.lever(3)
+    assert not lever["at_neck_limit"] and lever["held_N"] == pytest.approx(force, rel=0.01)
+    assert lever["incisor_N"] > 10.0
+    assert abs(lever["insertion_deg"] - deepest["insertion_deg"]) < 1.0
 
 
 def test_a_lever_loads_the_teeth_sooner_through_a_restricted_mouth_opening():
