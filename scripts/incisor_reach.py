@@ -15,8 +15,8 @@ For each grade of SoftSphereAirway-v0, at its family's centre force ``P*`` (soft
   or, where the neck's limit stops the turn first, the force it reached.
 
 The blade's flange sits under the incisors and lifting moves it away from them, so a view the lift reaches
-never needs the teeth; the lever reaches views a little deeper. Writes ``incisor_reach.md`` and
-``incisor_reach.json`` into ``--out``.
+never needs the teeth; the lever reaches at most a little deeper, and where the neck's limit stops it, not
+that far. Writes ``incisor_reach.md`` and ``incisor_reach.json`` into ``--out``.
 """
 
 from __future__ import annotations
