@@ -63,21 +63,21 @@ def centre(grade: int) -> tuple[float, float]:
     return float(np.mean(ranges["target_insertion_deg"])), float(np.mean(ranges["target_normal_force"]))
 
 
-def _start(grade: int, insertion_deg: float) -> tuple[Any, Any, np.ndarray, Any]:
-    """A reach env on ``grade`` reset toward the family's centre moved to ``insertion_deg``; its controller."""
+def _start(grade: int, insertion_deg: float) -> tuple[Any, Any, np.ndarray, Any, slice]:
+    """A reach env on ``grade`` reset toward the family's centre moved to ``insertion_deg``; its controller and
+    the device's slice of the observation (what the controller reads)."""
     config = haptic_config(airway_scene(grade))
     env = reach_env(config, HORIZON)
     world = env.world
     target = world.family.centre.copy()           # insertion and lateral arc (m), normal and sideways force (N)
     target[0] = math.radians(insertion_deg) * config["tissue"]["radius"]
     obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
-    return env, obs, target, HandController(world.config)
+    return env, obs, target, HandController(world.config), slice(2 * world.k, 2 * world.k + world.device_obs_size)
 
 
 def lift(grade: int, insertion_deg: float) -> dict[str, Any]:
     """The expert's controller toward the centre target at ``insertion_deg``: reached, the teeth's peak force."""
-    env, obs, target, controller = _start(grade, insertion_deg)
-    device = slice(2 * env.world.k, 2 * env.world.k + env.world.device_obs_size)
+    env, obs, target, controller, device = _start(grade, insertion_deg)
     teeth = 0.0
     for _ in range(HORIZON):
         obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
@@ -89,9 +89,8 @@ def lift(grade: int, insertion_deg: float) -> dict[str, Any]:
 def lever(grade: int, held: int = 50) -> dict[str, Any]:
     """Insert as the expert does until the blade rests on the tongue, then turn about the incisal edge to the
     centre's normal force and hold: the blade's insertion angle, the teeth's force, or the neck's limit."""
-    env, obs, target, controller = _start(grade, centre(grade)[0])
+    env, obs, target, controller, device = _start(grade, centre(grade)[0])
     laryngoscope = env.device.laryngoscope
-    device = slice(2 * env.world.k, 2 * env.world.k + env.world.device_obs_size)
     force = float(target[2])
     for _ in range(HORIZON):
         action = (controller.act(obs[None, device], target[None])[0] if laryngoscope.normal_force <= 0.0
