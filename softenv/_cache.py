@@ -4,6 +4,11 @@ Entries are keyed by a digest of everything that determines them (parameters plu
 version), so a stale entry is never read; a repeat request is a file read. The directory is
 ``$SOFTENV_CACHE_DIR`` if set, else ``~/.cache/softenv``. Writes are atomic, so parallel workers
 (async vector envs) can share it.
+
+An entry is built on one thread (BLAS and OpenMP, by threadpoolctl): a PCA's SVD on two OpenBLAS
+threads differs from one thread's in the last bits, and a search that reads the model amplifies them
+(a planning oracle's error sum moved in the 10th digit), so an entry's bits must not depend on the
+threads of whichever process built it first.
 """
 
 from __future__ import annotations
@@ -16,12 +21,15 @@ import zipfile
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
+from threadpoolctl import threadpool_limits
+
 from ._artifact import STAMP_MEMBER as _STAMP
 
 T = TypeVar("T")
 
 # Bump when the tissue model, sampling or tabulation changes results: every cached entry is rebuilt.
-PHYSICS_VERSION = 1
+# 2: entries built on one thread (version 1's could hold the last bits of a multi-threaded build)
+PHYSICS_VERSION = 2
 
 
 def cache_dir() -> Path:
@@ -53,7 +61,7 @@ def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
     with a warning, never trusted.
     """
     if not enabled:
-        return build()
+        return _build_on_one_thread(build)
     digest = _digest(kind, params)
     path = cache_dir() / f"{kind}-{digest[:20]}.npz"
     if path.exists():
@@ -65,7 +73,7 @@ def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
             return load(path)
         except (ValueError, KeyError, TypeError, AttributeError, OSError, EOFError, zipfile.BadZipFile) as exc:
             warnings.warn(f"rebuilding unreadable cache entry {path}: {exc}", RuntimeWarning, stacklevel=2)
-    value = build()
+    value = _build_on_one_thread(build)
     # saved beside, stamped, then renamed: readers see a whole, stamped entry or none
     tmp = path.with_name(f"{path.stem}.{os.getpid()}.building.npz")
     try:
@@ -76,6 +84,11 @@ def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
     finally:
         tmp.unlink(missing_ok=True)
     return value
+
+
+def _build_on_one_thread(build: Callable[[], T]) -> T:
+    with threadpool_limits(limits=1):
+        return build()
 
 
 def built_from(path: Path) -> str | None:

@@ -51,6 +51,48 @@ def test_cache_makes_a_repeat_instant_and_survives_corruption(tmp_path, monkeypa
     assert (t2 - t1) < (t1 - t0) or (t2 - t1) < 0.05
 
 
+def test_a_cache_entry_is_built_on_one_thread_whatever_threads_the_caller_runs(tmp_path, monkeypatch):
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from softenv._cache import cached
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    with threadpool_limits(limits=2):
+        assert max(pool["num_threads"] for pool in threadpool_info()) == 2       # the caller's: two
+        seen = cached("threads", {}, lambda: [pool["num_threads"] for pool in threadpool_info()],
+                      load=lambda path: None, save=lambda value, path: np.savez(path, seen=value))
+        assert max(pool["num_threads"] for pool in threadpool_info()) == 2       # given back after the build
+    assert seen and set(seen) == {1}
+
+
+# a default-size scene whose PCA and L-BFGS-trained MLP are large enough for two BLAS / OpenMP threads to
+# change their bits when the build runs on them (before builds were pinned: the MLP's weights by up to 0.1)
+_BUILD_MLP_SCENE = """
+import sys, numpy as np, gymnasium as gym, softenv
+scene = gym.make("SoftSphere-v0", response={"model": "mlp"}).unwrapped.world.scene
+np.savez(sys.argv[1], components=scene.shape_model.components_,
+         **{f"p{i}": p for i, p in enumerate(scene.response.params_)})
+"""
+
+
+@pytest.mark.slow
+def test_a_scene_built_by_a_two_thread_process_is_the_one_thread_scene_bit_for_bit(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    built = []
+    for threads in ("2", "1"):
+        env = {**os.environ, "SOFTENV_CACHE_DIR": str(tmp_path / threads), "OMP_NUM_THREADS": threads,
+               "OPENBLAS_NUM_THREADS": threads, "MKL_NUM_THREADS": threads}
+        out = tmp_path / f"scene-{threads}.npz"
+        subprocess.run([sys.executable, "-c", _BUILD_MLP_SCENE, str(out)], env=env, check=True)
+        built.append(np.load(out))
+    assert len(built[0].files) > 2
+    for name in built[0].files:
+        np.testing.assert_array_equal(built[0][name], built[1][name], err_msg=name)
+
+
 def test_save_load_round_trip(tmp_path):
     d = paper_dataset(441, n_deformations=3)
     path = tmp_path / "d.npz"
