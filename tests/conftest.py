@@ -28,6 +28,8 @@ _OWNS_CACHE = "SOFTENV_TEST_RUN_CACHE" not in os.environ
 if _OWNS_CACHE:
     os.environ["SOFTENV_TEST_RUN_CACHE"] = tempfile.mkdtemp(prefix="softenv-test-cache-")
 _CACHE = os.environ["SOFTENV_CACHE_DIR"] = os.environ["SOFTENV_TEST_RUN_CACHE"]
+# stable-baselines3's default logger makes an empty folder a learn() call in the system's temp directory
+os.environ.setdefault("SB3_LOGDIR", os.path.join(_CACHE, "sb3-logs"))
 
 try:  # torch is an optional extra; when present, keep it to one thread as well
     import torch

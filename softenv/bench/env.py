@@ -198,6 +198,7 @@ def ppo_row(quick: bool, n: int = 8) -> Row:
     time per environment step over whole ``learn`` calls (rollouts and updates), repeats interleaved."""
     from stable_baselines3 import PPO                              # the rl extra: only for this row
     from stable_baselines3.common.env_util import make_vec_env     # the rl extra
+    from stable_baselines3.common.logger import Logger             # the rl extra
 
     from ..envs.sb3 import SoftSphereSB3VecEnv                      # stable-baselines3
 
@@ -205,6 +206,7 @@ def ppo_row(quick: bool, n: int = 8) -> Row:
     models = {"haptic": PPO("MlpPolicy", SoftSphereSB3VecEnv(n, "SoftSphereHaptic-v0"), n_steps=steps // n, seed=0),
               "cartpole": PPO("MlpPolicy", make_vec_env("CartPole-v1", n_envs=n, seed=0), n_steps=steps // n, seed=0)}
     for model in models.values():                  # the first call compiles and warms up
+        model.set_logger(Logger(None, []))         # SB3's default logger leaves an empty folder in /tmp each learn
         model.learn(steps)
     samples: dict[str, list[float]] = {name: [] for name in models}
     for _ in range(3):
@@ -224,11 +226,14 @@ FIRST_PPO = """
 import sys, time
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import Logger
 from softenv.envs.sb3 import SoftSphereSB3VecEnv
 steps, n, name = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 t0 = time.perf_counter()
 env = SoftSphereSB3VecEnv(n, "SoftSphereHaptic-v0") if name == "haptic" else make_vec_env("CartPole-v1", n_envs=n, seed=0)
-PPO("MlpPolicy", env, n_steps=steps // n, seed=0).learn(steps)
+model = PPO("MlpPolicy", env, n_steps=steps // n, seed=0)
+model.set_logger(Logger(None, []))
+model.learn(steps)
 print(steps / (time.perf_counter() - t0))
 """
 
