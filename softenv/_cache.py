@@ -5,10 +5,9 @@ version), so a stale entry is never read; a repeat request is a file read. The d
 ``$SOFTENV_CACHE_DIR`` if set, else ``~/.cache/softenv``. Writes are atomic, so parallel workers
 (async vector envs) can share it.
 
-An entry is built on one thread (BLAS and OpenMP, by threadpoolctl): a PCA's SVD on two OpenBLAS
-threads differs from one thread's in the last bits, and a search that reads the model amplifies them
-(a planning oracle's error sum moved in the 10th digit), so an entry's bits must not depend on the
-threads of whichever process built it first.
+An entry is built on one thread (BLAS and OpenMP, by threadpoolctl): multi-threaded LAPACK and torch
+round differently, and an entry's bits must not depend on the threads of whichever process built it
+first (docs: how it works).
 """
 
 from __future__ import annotations
