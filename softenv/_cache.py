@@ -5,9 +5,10 @@ version), so a stale entry is never read; a repeat request is a file read. The d
 ``$SOFTENV_CACHE_DIR`` if set, else ``~/.cache/softenv``. Writes are atomic, so parallel workers
 (async vector envs) can share it.
 
-An entry is built on one thread (BLAS and OpenMP, by threadpoolctl): multi-threaded LAPACK and torch
-round differently, and an entry's bits must not depend on the threads of whichever process built it
-first (docs: how it works).
+An entry is built on one thread (BLAS and OpenMP, by threadpoolctl where installed): multi-threaded
+LAPACK and torch round differently, and an entry's bits must not depend on the threads of whichever
+process built it first (docs: how it works). Without threadpoolctl, a process whose thread variables
+are not all 1 builds on its own threads, with a warning.
 """
 
 from __future__ import annotations
@@ -20,9 +21,13 @@ import zipfile
 from pathlib import Path
 from typing import Any, Callable, TypeVar
 
-from threadpoolctl import threadpool_limits
-
 from ._artifact import STAMP_MEMBER as _STAMP
+from .parallel import THREAD_VARS
+
+try:  # in the rl, device and fem extras; the core stays numpy and gymnasium
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - exercised by monkeypatching in tests
+    threadpool_limits = None
 
 T = TypeVar("T")
 
@@ -86,8 +91,14 @@ def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
 
 
 def _build_on_one_thread(build: Callable[[], T]) -> T:
-    with threadpool_limits(limits=1):
-        return build()
+    if threadpool_limits is not None:
+        with threadpool_limits(limits=1):
+            return build()
+    if not all(os.environ.get(name) == "1" for name in THREAD_VARS):
+        warnings.warn("building a cache entry on this process's BLAS/OpenMP threads: its last bits depend on "
+                      f"them; install threadpoolctl (softenv[rl], [device] or [fem]) or set {', '.join(THREAD_VARS)}"
+                      " to 1", RuntimeWarning, stacklevel=3)
+    return build()
 
 
 def built_from(path: Path) -> str | None:

@@ -65,6 +65,23 @@ def test_a_cache_entry_is_built_on_one_thread_whatever_threads_the_caller_runs(t
     assert seen and set(seen) == {1}
 
 
+def test_without_threadpoolctl_an_unpinned_build_warns_and_a_pinned_one_does_not(tmp_path, monkeypatch):
+    import warnings
+
+    import softenv._cache as cache
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(cache, "threadpool_limits", None)       # a core install: numpy and gymnasium only
+    save = lambda value, path: np.savez(path, value=value)      # noqa: E731
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+    with pytest.warns(RuntimeWarning, match="OPENBLAS_NUM_THREADS"):
+        assert cache.cached("unpinned", {}, lambda: 1, load=lambda path: None, save=save) == 1
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cache.cached("pinned", {}, lambda: 2, load=lambda path: None, save=save) == 2
+
+
 # a default-size scene whose PCA and L-BFGS-trained MLP are large enough for two BLAS / OpenMP threads to
 # change their bits when the build runs on them (before builds were pinned: the MLP's weights by up to 0.1)
 _BUILD_MLP_SCENE = """
