@@ -1,6 +1,6 @@
 """Difficult airways: the airway's settings and the grades that set them.
 
-A scene's ``airway`` section holds a ``grade`` (1 normal ... 4 very difficult) and five settings,
+A scene's ``airway`` section holds a ``grade`` (1 normal ... 4 very difficult) and six settings,
 each ``None`` to take the grade's value (:data:`GRADES`) or a number of its own:
 
 | setting | unit | what it changes in the scene |
@@ -11,6 +11,8 @@ each ``None`` to take the grade's value (:data:`GRADES`) or a number of its own:
 | ``larynx_lift`` | | multiplies the target family's normal forces: how much lift the view needs |
 | ``tongue_stiffness`` | | multiplies the tongue's Young's modulus, and the target family's forces with it, so the
   targets are the normal tongue's shapes, each needing that much more force |
+| ``interincisal_gap`` | mm | the upper and lower incisal edges' distance in the start pose, the blade's flange and
+  ``mouth_opening`` between them; the grade's ``None``: no lower teeth (a jaw that never closes on the blade) |
 
 Grade 1 is the airway of every laryngoscope scene before grades existed (SoftSphereHaptic-v0's), so
 a scene whose airway section is left at its defaults is keyed, cached and scored as before. The
@@ -23,14 +25,16 @@ from dataclasses import dataclass
 from collections.abc import Mapping
 from typing import Any
 
-# grade -> (name, mouth opening mm, neck extension rad, larynx depth deg, larynx lift, tongue stiffness)
-GRADES: dict[int, tuple[str, float, float, float, float, float]] = {
-    1: ("normal", 3.0, 0.5, 0.0, 1.0, 1.0),
-    2: ("restricted neck extension", 2.0, 0.4, 2.0, 1.1, 1.0),
-    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0),
-    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15),
+# grade -> (name, mouth opening mm, neck extension rad, larynx depth deg, larynx lift, tongue stiffness,
+# interincisal gap mm or None)
+GRADES: dict[int, tuple[str, float, float, float, float, float, float | None]] = {
+    1: ("normal", 3.0, 0.5, 0.0, 1.0, 1.0, None),
+    2: ("restricted neck extension", 2.0, 0.4, 2.0, 1.1, 1.0, None),
+    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0, None),
+    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15, None),
 }
-SETTINGS = ("mouth_opening", "neck_extension", "larynx_depth", "larynx_lift", "tongue_stiffness")
+SETTINGS = ("mouth_opening", "neck_extension", "larynx_depth", "larynx_lift", "tongue_stiffness", "interincisal_gap")
+OPTIONAL_SETTINGS = ("interincisal_gap",)    # None resolved: that part of the anatomy is absent
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,7 @@ class Airway:
     larynx_depth: float               # deg
     larynx_lift: float
     tongue_stiffness: float
+    interincisal_gap: float | None    # mm; None: no lower teeth
 
     @property
     def name(self) -> str:
@@ -52,6 +57,11 @@ class Airway:
     def settings(self) -> tuple[float, ...]:
         """The values of :data:`SETTINGS`, in order."""
         return tuple(getattr(self, k) for k in SETTINGS)
+
+    def keyed(self) -> dict[str, float]:
+        """The settings by name, an absent part (:data:`OPTIONAL_SETTINGS` at ``None``) left out: how keys,
+        logs and reports name the airway, the same as before that part existed."""
+        return {k: v for k, v in zip(SETTINGS, self.settings) if v is not None}
 
     @property
     def is_normal(self) -> bool:
@@ -67,8 +77,9 @@ class Airway:
 def airway(section: Mapping[str, Any]) -> Airway:
     """The settings of an ``airway`` section (a made config's): each ``None`` takes its grade's value."""
     grade = section["grade"]
-    values = GRADES[grade][1:]
-    return Airway(grade, *(float(section[k]) if section[k] is not None else v for k, v in zip(SETTINGS, values)))
+    values: tuple[Any, ...] = GRADES[grade][1:]
+    # a section written before a setting existed (an older log's) takes the grade's value for it
+    return Airway(grade, *(float(section[k]) if section.get(k) is not None else v for k, v in zip(SETTINGS, values)))
 
 
 NORMAL_AIRWAY: dict[str, Any] = {"grade": 1, **{k: None for k in SETTINGS}}     # the section's defaults
@@ -102,7 +113,8 @@ def scene_title(section: Mapping[str, Any]) -> str:
 def grade_table() -> str:
     """A Markdown table of the grades and their settings."""
     lines = ["| grade | name | mouth opening (mm) | neck extension (rad) | larynx depth (deg) | larynx lift | "
-             "tongue stiffness |", "|---|---|---|---|---|---|---|"]
+             "tongue stiffness | interincisal gap (mm) |", "|---|---|---|---|---|---|---|---|"]
     for grade, (name, *values) in GRADES.items():
-        lines.append(f"| {grade} | {name} | " + " | ".join(f"{v:g}" for v in values) + " |")
+        lines.append(f"| {grade} | {name} | " + " | ".join("no lower teeth" if v is None else f"{v:g}" for v in values)
+                     + " |")
     return "\n".join(lines)

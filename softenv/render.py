@@ -132,7 +132,7 @@ class SphereFigure:
 
 class SagittalPanel:
     """The device's side view beside the sphere: the tongue's midline section (deformed and at
-    rest), the blade, the upper incisors, the hand and the contact force."""
+    rest), the blade, the incisors, the hand and the contact force."""
 
     def __init__(self, figure: Any, rect: tuple[float, float, float, float], triangles: np.ndarray,
                  radius: float) -> None:
@@ -147,6 +147,7 @@ class SagittalPanel:
         self.tongue = self.ax.fill([0], [0], color="#e8909a", alpha=0.9, lw=0.8, ec="#6e0f26")[0]
         self.blade = self.ax.fill([0], [0], color="#9aa5b1", ec="#2f3b48", lw=1.0)[0]
         self.incisor = self.ax.fill([0], [0], color="#fffbe6", ec="#8a7f50", lw=1.0)[0]
+        self.lower_incisor = self.ax.fill([0], [0], color="#fffbe6", ec="#8a7f50", lw=1.0, visible=False)[0]
         (self.handle,) = self.ax.plot([], [], color="#2f3b48", lw=4.0, solid_capstyle="round")
         (self.hand,) = self.ax.plot([], [], "o", color="#19c37d", ms=6)
         self.arrow = self.ax.annotate("", xy=(0, 0), xytext=(0, 0),
@@ -162,6 +163,10 @@ class SagittalPanel:
         self.blade.set_xy(device["outline"])
         a, b, r = device["incisor"]
         self.incisor.set_xy(capsule(np.asarray(a), np.asarray(b), r))
+        if device["lower_incisor"] is not None:
+            a, b, r = device["lower_incisor"]
+            self.lower_incisor.set_xy(capsule(np.asarray(a), np.asarray(b), r))
+            self.lower_incisor.set_visible(True)
         gx, gy, _ = device["hand"]
         heel, top = device["handle"]
         self.handle.set_data([heel[0], top[0]], [heel[1], top[1]])

@@ -89,6 +89,7 @@ class AirwaySection(TypedDict):
     larynx_depth: float | None          # deg
     larynx_lift: float | None
     tongue_stiffness: float | None
+    interincisal_gap: float | None      # mm
 
 
 class RenderSection(TypedDict):

@@ -18,7 +18,7 @@ from softenv.training.scoring import ADVICE, AIRWAY_ADVICE, replay_hand, score_f
 from softenv.training.logs import HAND_LOG, read_log, read_scene, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
-from lever_support import incisor_reach
+from lever_support import incisor_reach, jaw_push
 
 KEYED = ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task")
 
@@ -41,6 +41,10 @@ def test_the_normal_airway_is_keyed_as_before_airways_existed_and_another_is_not
     assert "airway" in graded and graded != config_key(make_config(device=AIRWAY_DEVICE), KEYED)
     assert config_key(make_config(airway={"grade": 2}, device=AIRWAY_DEVICE), ("render",)) == \
         config_key(make_config(), ("render",))                         # not keyed where it bears on nothing
+    # no grade has lower teeth: keyed by the five settings there were before, and a gap given is keyed
+    assert "interincisal_gap" not in graded
+    gapped = config_key(make_config(airway={"grade": 2, "interincisal_gap": 30.0}, device=AIRWAY_DEVICE), KEYED)
+    assert "('interincisal_gap', 30.0)" in gapped and gapped != graded
 
 
 @pytest.mark.parametrize("sections, match", [
@@ -48,6 +52,7 @@ def test_the_normal_airway_is_keyed_as_before_airways_existed_and_another_is_not
     ({"airway": {"mouth_opening": -1.0}}, r"airway\.mouth_opening.*\[0, 20\]"),
     ({"airway": {"neck_extension": 0.6}}, r"airway\.neck_extension.*\[0\.1, 0\.5\]"),
     ({"airway": {"tongue_stiffness": float("nan")}}, r"airway\.tongue_stiffness"),
+    ({"airway": {"interincisal_gap": 10.0}}, r"airway\.interincisal_gap.*\[22, 80\]"),
     ({"airway": {"lift": 1.0}}, r"unknown key 'lift' in scene section 'airway'.*larynx_lift"),
     # the hardest grade's targets need more force than SoftSphereHaptic-v0's device gives
     ({"airway": {"grade": 4}}, r"task\.target_normal_force=\(20\.0, 40\.0\) \(on airway grade 4: \(28\.7.*57\.5.*\)\) "
@@ -95,6 +100,25 @@ def test_the_mouth_opening_is_the_incisors_clearance_above_the_flange_at_the_sta
     env.reset(seed=0)
     env.step(np.zeros(4, np.float32))                # the hand held still: pymunk's shapes placed where the blade is
     assert env.device.laryngoscope.incisor_clearance() == pytest.approx(mouth_opening * 1e-3, abs=1e-9)
+
+
+@pytest.mark.parametrize("mouth_opening, gap", [(3.0, 26.0), (0.0, 40.0)])
+def test_the_interincisal_gap_is_the_edges_distance_with_the_blade_between(mouth_opening, gap):
+    """The lower incisal edge lies ``gap`` under the upper one (their roundings' facing points, the upper
+    incisors where pymunk holds them), and ``gap - mouth_opening - 22 mm`` under the blade's underside in
+    the start pose; without the setting there is no jaw; a gap the blade cannot fit in is refused."""
+    env = gym.make("SoftSphereAirway-v0", airway={"mouth_opening": mouth_opening, "interincisal_gap": gap}).unwrapped
+    env.reset(seed=0)
+    env.step(np.zeros(4, np.float32))
+    device = env.device.laryngoscope
+    segment = device._space.incisors[0]
+    upper_edge = segment.a.y - segment.radius
+    assert upper_edge - (device.c.jaw[1] + device.c.jaw_radius) == pytest.approx(gap * 1e-3, abs=1e-12)
+    depth = jaw_push(device)[0]
+    assert depth == pytest.approx((mouth_opening + 22.0 - gap) * 1e-3, abs=1e-9)
+    assert gym.make("SoftSphereAirway-v0").unwrapped.device.laryngoscope.c.jaw is None
+    with pytest.raises(ValueError, match=r"airway\.interincisal_gap = 30 mm .*allowed >= .* = 32 mm"):
+        gym.make("SoftSphereAirway-v0", airway={"mouth_opening": 10.0, "interincisal_gap": 30.0})
 
 
 @pytest.mark.parametrize("grade", [1, 2])

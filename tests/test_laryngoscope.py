@@ -10,7 +10,7 @@ import pytest
 
 from softenv.devices.contact import TongueContact
 from softenv.devices.laryngoscope.batch import LaryngoscopeBatch
-from softenv.devices.laryngoscope.params import ACCURACY, LaryngoscopeParams, substep_count
+from softenv.devices.laryngoscope.params import ACCURACY, JAW_STIFFNESS, LaryngoscopeParams, substep_count
 from softenv.devices.laryngoscope.part import laryngoscope_parts
 from softenv.devices.laryngoscope.single import Laryngoscope
 from softenv.devices.laryngoscope.space import COLLISION_SLOP, virtual_coupling
@@ -21,7 +21,10 @@ from softenv.envs.world import World
 from softenv.haptics import HapticLoop
 from softenv.tissue import AnalyticTissue
 
+from lever_support import jaw_push
+
 PRESS, HOLD = [0.0, 0.9, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]
+JAW = {"airway": {"interincisal_gap": 26.0}}      # lower incisors 1 mm under the blade in the start pose
 
 
 def make_world(**sections) -> World:
@@ -165,11 +168,31 @@ def test_levering_loads_the_incisors_and_a_straight_press_does_not():
     assert dev.incisor_force == pytest.approx(np.linalg.norm(coupling_pull(dev)), rel=0.01)
 
 
+def test_a_blade_pressed_onto_the_lower_incisors_rests_on_the_jaw():
+    """Lower incisors 1 mm under the blade: the same press that indents the tongue without them comes to
+    rest on the jaw, clear of the tongue and the upper teeth, the jaw's spring squeezed by the coupling's
+    pull over its stiffness (statics: the two balance); the blade, levered up, leaves the jaw."""
+    dev, free = make_device(**JAW), make_device()
+    for period in range(108):
+        for d in (dev, free):
+            d.control_step(PRESS if period < 8 else HOLD)
+    depth, push = jaw_push(dev)
+    pull = np.linalg.norm(coupling_pull(dev))
+    assert free.normal_force > 15.0 and jaw_push(free) == (-math.inf, 0.0)
+    assert dev.normal_force == 0.0 and dev.incisor_force == 0.0 and push > 15.0
+    assert push == pytest.approx(pull, rel=0.01)
+    assert depth == pytest.approx(pull / JAW_STIFFNESS, rel=0.01)
+    for _ in range(30):
+        dev.control_step([0.0, -1.0, 0.0, -1.0])
+    assert jaw_push(dev)[1] == 0.0 and dev.incisor_force > 1.0
+
+
 EXTREMES = {
     "default": {},
     "stiff coupling, 10 g blade": {"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}},
     "soft tongue (1 kPa)": {"tissue": {"E": 1e3}},
     "stiff tongue (10 MPa)": {"tissue": {"E": 1e7}},
+    "lower incisors 1 mm under the blade": JAW,
 }
 
 
@@ -185,6 +208,8 @@ def test_full_speed_into_teeth_or_tongue_stays_finite_and_never_tunnels(name, ac
         assert dev.incisor_clearance() > -1e-3
         # the blade never passes the tongue's saturation barrier (80 % of the radius)
         assert dev.penetration() < 0.83 * dev.c.R
+        # nor sinks onto the lower incisors by half the flange's height
+        assert jaw_push(dev)[0] < 0.5 * dev.params.flange_height
 
 
 @pytest.mark.parametrize("name", list(EXTREMES))
@@ -274,14 +299,16 @@ def test_the_haptic_loop_renders_the_press_within_the_preset():
 @pytest.mark.parametrize("sections, periods, on_incisors", [
     ({}, 400, 10),
     ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 40, 0),
-], ids=["default", "stiff"])
+    (JAW, 400, 10),
+], ids=["default", "stiff", "jaw"])
 def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: dict, periods: int,
                                                                      on_incisors: int) -> None:
     """The single device (Python floats, its hand-inlined loop) against the batch's device 0 (numpy,
     ``pymunk.batch``): the same state after every control period, bit for bit but for the sign of zero, over pressing, sweeping,
     levering and idle periods, in contact with the tongue and the incisors and at the walls; on the
-    default scene and on the stiffest corner (1e6 N/m coupling, 10 g blade, 10 MPa tongue: 1,826
-    substeps a period, the implicit barrier at work; too short a run to reach the incisors)."""
+    default scene, on the stiffest corner (1e6 N/m coupling, 10 g blade, 10 MPa tongue: 1,826
+    substeps a period, the implicit barrier at work; too short a run to reach the incisors) and with lower
+    incisors under the blade (the jaw pressed, with the upper incisors too)."""
     world = make_world(**sections)
     parts = laryngoscope_parts(world.scene, world.config)
     single, batch = Laryngoscope(*parts), LaryngoscopeBatch(*parts, 1)
@@ -291,10 +318,11 @@ def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: d
     actions[:3 * part, 1] = np.abs(actions[:3 * part, 1])         # press into the tongue first
     actions[3 * part:4 * part] = [1.0, 0.0, 0.0, 1.0]             # insert and lever: the incisors, the walls
     actions[6 * part:6 * part + part // 2] = 0.0
-    touched = incisors = 0
+    touched = incisors = jawed = 0
     for a in actions:
         single.control_step(a.tolist())
         batch.control_step(a[None])
+        jawed += jaw_push(single)[1] > 0
         s, t = single.state(), batch.state()
         for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
             assert np.array_equal(getattr(s, field), getattr(t, field)), field     # (zero's sign may differ)
@@ -302,6 +330,7 @@ def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: d
         touched += single.normal_force > 0
         incisors += single.incisor_force > 0
     assert touched > periods // 4 and incisors >= on_incisors
+    assert (jawed >= 10) == ("airway" in sections)
 
 
 @pytest.mark.parametrize("sections", [{}, {"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0},

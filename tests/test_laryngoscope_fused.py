@@ -33,7 +33,8 @@ INTERPRETED = textwrap.dedent("""
     import numpy as np, torch
     from softenv.devices.laryngoscope.fused import LaryngoscopeFused
     from softenv.devices.laryngoscope.part import laryngoscope_parts
-    from softenv.devices.laryngoscope.physics import hand_command
+    from softenv._ops import ScalarOps
+    from softenv.devices.laryngoscope.physics import hand_command, jaw_force
     from softenv.devices.laryngoscope.warp_arrays import LaryngoscopeWarp
     from softenv.envs import HAPTIC_SCENES
     from softenv.envs.config import scene_config
@@ -57,8 +58,11 @@ INTERPRETED = textwrap.dedent("""
     hardest = max(levering, key=lambda k: rollout[k][3].max())          # the blade deepest into the incisors
     # levered on the incisors, the tongue pressed where the barrier predicts the teeth's push
     levered = [k for k, r in enumerate(rollout) if (r[3][2:] > 0).all() and (r[2].contact[2:, 0] > 25).all()]
+    # on an airway with lower incisors: the periods ending with blades pressing the jaw
+    jawed = [k for k, r in enumerate(rollout) if ref.c.jaw is not None and any(
+        jaw_force((b[0], b[1], b[2], np.cos(b[2]), np.sin(b[2]), *b[3:]), ref.c, ScalarOps)[1] != 0 for b in r[2].blade)]
     worst = {}
-    for k in sorted({tongue[0], levering[0], hardest, levering[-1], levered[0], len(rollout) - 1}):
+    for k in sorted({tongue[0], levering[0], hardest, levering[-1], levered[0], len(rollout) - 1, *jawed[:1], *jawed[-1:]}):
         before, a, after, _ = rollout[k]
         fused.load_state(before)
         # the hand's command as the Warp kernel makes it (the C library's cos and sin): the kernels' own arithmetic
@@ -69,14 +73,16 @@ INTERPRETED = textwrap.dedent("""
             x, y = getattr(after, field), getattr(state, field)
             scale = max(float(np.abs(x).max()), 1e-300)
             worst[field] = max(worst.get(field, 0.0), float(np.abs(x - y).max()) / scale)
-    levering, tongue, levered = len(levering), len(tongue), len(levered)
-    print(json.dumps({"worst": worst, "levering": levering, "tongue": tongue, "levered": levered}))
+    levering, tongue, levered, jawed = len(levering), len(tongue), len(levered), len(jawed)
+    print(json.dumps({"worst": worst, "levering": levering, "tongue": tongue, "levered": levered, "jawed": jawed}))
 """)
 
 
-# the default scene, and softenv bench's light blade driven fast, which sinks it into the incisors until
-# their cores overlap (tests/test_laryngoscope_arrays.py): the collision's other branch
-CORNERS = {"default": {}, "fast": {"device": {"max_hand_speed": 5.0, "blade_mass": 0.01, "coupling_damping": 150.0}}}
+# the default scene, softenv bench's light blade driven fast, which sinks it into the incisors until their
+# cores overlap (tests/test_laryngoscope_arrays.py): the collision's other branch; and an airway with lower
+# incisors 1 mm under the blade (the jaw's spring)
+CORNERS = {"default": {}, "fast": {"device": {"max_hand_speed": 5.0, "blade_mass": 0.01, "coupling_damping": 150.0}},
+           "jaw": {"airway": {"interincisal_gap": 26.0}}}
 
 
 @pytest.mark.slow
@@ -87,7 +93,7 @@ def test_the_fused_kernel_steps_as_the_warp_kernel_in_the_interpreter(corner):
     before a period with the Warp kernel's hand command: periods pressing the tongue, the first and last
     levering on the incisors, the one bearing hardest on them (the fast corner's blade sinks into them),
     the first with two blades levered on them and pressing the tongue past 25 N, and the last (those two
-    held there); the state within 1e-12 of each field's largest value (numpy's exp, which the interpreter
+    held there), and on the airway with lower incisors the first and last pressing the jaw; the state within 1e-12 of each field's largest value (numpy's exp, which the interpreter
     calls, may differ from the C library's in the last bit)."""
     world = World(scene_config(HAPTIC_SCENES["SoftSphereHaptic-v0"], CORNERS[corner]))
     lever = lever_actions(Laryngoscope(*laryngoscope_parts(world.scene, world.config)), 30.0, 80, 20)
@@ -96,6 +102,7 @@ def test_the_fused_kernel_steps_as_the_warp_kernel_in_the_interpreter(corner):
     assert run.returncode == 0, run.stderr[-3000:]
     checked = json.loads(run.stdout.strip().splitlines()[-1])
     assert checked["levering"] >= 3 and checked["tongue"] >= 3 and checked["levered"] >= 10, checked
+    assert (checked["jawed"] >= 10) == (corner == "jaw"), checked
     assert max(checked["worst"].values()) <= 1e-12, checked
 
 

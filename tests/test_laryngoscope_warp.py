@@ -25,7 +25,7 @@ from softenv.envs.config import scene_config
 from softenv.envs.world import World
 from softenv.training.hand import haptic_config
 
-from lever_support import lever_actions
+from lever_support import jaw_push, lever_actions
 
 torch = pytest.importorskip("torch")
 
@@ -51,15 +51,17 @@ def _torch(parts, n):
     ({"device": {"coupling_stiffness": 1e6, "blade_mass": 0.01, "handle_mass": 0.0}, "tissue": {"E": 1e7}}, 10, 0, 0),
     ({"tissue": {"E": 1e3}}, 200, 0, 0),
     ({"device": {"max_hand_speed": 5.0, "blade_mass": 0.01, "coupling_damping": 150.0}}, 100, 10, 5),
-], ids=["default", "stiff", "soft", "fast"])
+    ({"airway": {"interincisal_gap": 26.0}}, 300, 10, 0),
+], ids=["default", "stiff", "soft", "fast", "jaw"])
 def test_every_device_of_the_warp_engine_equals_a_single_pymunk_device_bit_for_bit(sections, periods, on_incisors,
                                                                                   sunk, engine):
     """The Warp kernel on numpy arrays and on CPU tensors against single pymunk devices, each of 4 with its
     own actions: pressing, sweeping, levering on the incisors and into the walls, idle; the same state
     after every control period (blade, hand, lateral, tongue and incisor contact, hand velocity) and the
     same observation. The documented extreme corners (``softenv bench``'s): 1e6 N/m coupling, 10 g blade,
-    10 MPa tongue; a 1 kPa tongue; and a light, heavily damped blade driven at 5 m/s, which pymunk finds
-    sunk past the incisors' radius (the collision's EPA branch)."""
+    10 MPa tongue; a 1 kPa tongue; a light, heavily damped blade driven at 5 m/s, which pymunk finds
+    sunk past the incisors' radius (the collision's EPA branch); and lower incisors 1 mm under the blade,
+    the blades resting on the jaw and levered off it onto the upper incisors."""
     parts = _parts(sections)
     n = 4
     singles, batch = [Laryngoscope(*parts) for _ in range(n)], engine(parts, n)
@@ -69,10 +71,11 @@ def test_every_device_of_the_warp_engine_equals_a_single_pymunk_device_bit_for_b
     actions[:3 * part, :, 1] = np.abs(actions[:3 * part, :, 1])      # press into the tongue first
     actions[3 * part:4 * part, :2] = [1.0, 0.0, 0.0, 1.0]             # two insert and lever: the incisors, the walls
     actions[6 * part:6 * part + part // 2] = 0.0
-    incisors, deep = 0, []
+    incisors, deep, jawed = 0, [], 0
     for a in actions:
         for single, row in zip(singles, a):
             single.control_step(row.tolist())
+            jawed += jaw_push(single)[1] > 0
             single._blade.each_arbiter(lambda arbiter: deep.extend(q.distance <= -INCISOR_RADIUS for q in
                                                                    arbiter.contact_point_set.points))
         batch.control_step(batch._array(a))
@@ -84,6 +87,7 @@ def test_every_device_of_the_warp_engine_equals_a_single_pymunk_device_bit_for_b
             assert single.observation() == np.asarray(batch.observation()[i]).tolist()
         incisors += int(np.count_nonzero(np.asarray(batch.incisor_force) > 0))
     assert incisors >= on_incisors and sum(deep) >= sunk
+    assert (jawed >= 100) == ("airway" in sections)
 
 
 @wp.kernel(enable_backward=False, module="unique")

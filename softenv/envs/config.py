@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from typing import Any, Callable, cast
 
 from .._validation import check_choice, check_int, check_real
-from ..airway import GRADES, SETTINGS, airway, target_ranges
+from ..airway import GRADES, airway, target_ranges
 from ..devices.base import device_kind
 from ..devices.laryngoscope import BATCH_ENGINES, EXACT_ENGINES, RETIRED_ENGINES
 from ..fem.params import FE_POISSON
@@ -230,6 +230,10 @@ SCHEMA: dict[str, dict[str, Field]] = {
         "tongue_stiffness": Field(None, "", "[0.5, 2] | None", _optional(_real(0.5, 2)),
                                   "multiplies tissue.E and the target forces: the normal tongue's target shapes, "
                                   "each needing that much more force (grade 1: 1)"),
+        "interincisal_gap": Field(None, "mm", "[22, 80] | None", _optional(_real(22, 80)),
+                                  "the upper and lower incisal edges' distance in the start pose, with the blade's "
+                                  "22 mm flange and mouth_opening between them (at least their sum); every grade: "
+                                  "no lower teeth"),
     },
     "render": {
         "size": Field(320, "px", "64-2048", _int(64, 2048), "frame width and height"),
@@ -413,6 +417,6 @@ def config_key(config: Mapping[str, Any], sections: tuple[str, ...]) -> str:
     if section is not None and set(sections) & {"tissue", "device", "task"}:
         settings = airway(section)
         if not settings.is_normal:
-            keys.append(("airway", list(zip(SETTINGS, settings.settings))))
+            keys.append(("airway", list(settings.keyed().items())))
     return repr(keys)
 

@@ -208,6 +208,12 @@ class PlayView:
         self.drawn["blade"] = self._bbox(outline)
         self._label("blade", outline[3], (0, -22))
         self._label("handle", top, (12, -6))
+        if device["lower_incisor"] is not None:            # the lower incisors: where the blade rests
+            a, b, r = device["lower_incisor"]
+            tooth = capsule(np.asarray(a), np.asarray(b), r)
+            pg.draw.polygon(self.screen, TOOTH, self.pxs(tooth))
+            pg.draw.polygon(self.screen, (138, 127, 80), self.pxs(tooth), 2)
+            self.drawn["lower incisors"] = self._bbox(tooth)
         # the upper incisors: red with the force while touched
         a, b, r = device["incisor"]
         touched = device["incisor_force"] > 0.0

@@ -17,8 +17,9 @@ smoothness as the force's jerk), both built from the weights and terms below, an
 carries its own.
 
 ``time_to_target``: first time the shape error falls under the scene's tolerance. ``INCISOR_LIMIT_N``
-= 10 N: in manikin studies experts load the upper incisors with a few newtons at most, novices with
-tens (peak forces of 20-60 N are reported); 10 N or more costs the whole term.
+= 10 N, a stated choice: levering on the upper incisors is an error in the technique taught (lift along
+the handle), though manikin studies measure peak incisor forces of 36-58 N in every group of experience
+(Bucx et al. 1995); 10 N or more costs the whole term.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ..airway import GRADES, SETTINGS, airway, scene_title, target_ranges
+from ..airway import airway, scene_title, target_ranges
 from ..devices.laryngoscope import clinical
 from .._artifact import Writer, atomic_write_all, check_out_dir
 from .._validation import check_choice, check_int, check_real, printable
@@ -108,7 +109,7 @@ def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
     gain = report["points_to_gain"]
     worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
     patient = report.get("airway") or {}
-    graded = bool(patient) and tuple(patient["settings"].values()) != GRADES[1][1:]
+    graded = bool(patient) and not airway({"grade": 1, **patient["settings"]}).is_normal
     return [ADVICE[k].format(safe_force=report["safe_force_N"])
             + (" " + AIRWAY_ADVICE[k].format(**patient["settings"], target_force=patient["target_force_N"])
                if graded and k in AIRWAY_ADVICE else "") for k in worst]
@@ -363,7 +364,7 @@ def score_log(table: np.ndarray, schema: Schema, config: SceneConfig, path: str 
     patient = airway(config["airway"])
     report = {"trajectory": printable(str(path)), "log": schema.name, "formula_version": SCORE_VERSION, "scene": sections, "scene_from": scene_from,
               "airway": {"grade": patient.grade, "name": patient.name, "title": scene_title(config["airway"]),
-                         "settings": dict(zip(SETTINGS, patient.settings)),
+                         "settings": patient.keyed(),
                          "target_force_N": float(np.mean(target_ranges(config["task"], config["airway"])["target_normal_force"]))},
               **parts,
               "weights": weights, "expert_parts": expert_parts, "safe_force_N": safe_force,

@@ -13,7 +13,7 @@ import pymunk.batch
 
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
-from .physics import tongue_substep
+from .physics import jaw_force, tongue_substep
 from .space import DeviceSpace, listen_to_incisors, teeth_on_blade
 from .state import ArrayLaryngoscopes
 
@@ -93,9 +93,16 @@ class LaryngoscopeBatch(ArrayLaryngoscopes):
         hl = ops.clip(v_lat, (lo[3] - hand_lat) / h, (hi[3] - hand_lat) / h)
         hand_lat = hand_lat + h * hl
         ca, sa = ops.cos(a), ops.sin(a)
+        blade = (px, py, a, ca, sa, vx, vy, w)
+        teeth = tuple(self._teeth.T)
+        if c.jaw is not None:                             # the jaw's push now, with the incisors' last
+            jaw = jaw_force(blade, c, ops)
+            teeth = tuple(t + j for t, j in zip(teeth, jaw))
         fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep(
-            (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-            tuple(self._teeth.T), self._loads, self._slopes, c, ops)
+            blade, (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl, teeth, self._loads,
+            self._slopes, c, ops)
+        if c.jaw is not None:
+            fx, fy, torque = fx + jaw[0], fy + jaw[1], torque + jaw[2]
         self._teeth_next[:] = 0.0
         self._advance((hvx, hvy, hw), (vx, vy, w), (fx, fy, torque), impulse)
         self._teeth, self._teeth_next = self._teeth_next, self._teeth

@@ -17,7 +17,7 @@ constants. ``scripts/fused_kernel_profile.py`` shows what it compiles to on a GP
 
 from __future__ import annotations
 
-from dataclasses import astuple
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -31,11 +31,13 @@ from .state import HAND_ANCHORS, PERSISTENCE, SOLVER_ITERATIONS, TINY
 from .tensors import LaryngoscopeTensors
 
 BLOCK = 128            # devices a program (one thread each)
+JAW_FIELDS = ("jaw", "jaw_radius", "k_jaw", "c_jaw")   # Constants' last fields: their own group, after the blade
 COMPILE_OPTIONS = {"enable_fp_fusion": False}     # no fused multiply-add: the host's roundings
 
-# where :func:`constants` puts each group: the tongue's (:class:`.physics.Constants` flattened) at 0, then
-# the coupling's, the contact's scalars, the springs' hand anchors, the segment's ends and normal, the
-# blade's vertices and their plane normals
+# where :func:`constants` puts each group: the tongue's (:class:`.physics.Constants` flattened, but the jaw's) at
+# 0, then the coupling's, the contact's scalars, the springs' hand anchors, the segment's ends and normal, the
+# blade's vertices and their plane normals, and last the jaw's (edge x, y, radius, spring, damper: at
+# _LOCAL + 4 V; zeros without one)
 _COUPLING: tl.constexpr = tl.constexpr(30)
 _SOLVER: tl.constexpr = tl.constexpr(38)
 _ANCHORS: tl.constexpr = tl.constexpr(47)
@@ -47,13 +49,15 @@ _LOCAL: tl.constexpr = tl.constexpr(57)
 def constants(dev: LaryngoscopeTensors) -> tuple[float, ...]:
     """The kernel's constants in the layout :func:`_control_period` reads (``C``)."""
     c, s, k = dev.c, dev.incisors, dev.coupling
-    tongue = [float(v) for x in astuple(c) for v in (x if isinstance(x, tuple) else (x,))]
+    tongue = [float(v) for f in fields(c) if f.name not in JAW_FIELDS
+              for x in [getattr(c, f.name)] for v in (x if isinstance(x, tuple) else (x,))]
+    jaw = [*(c.jaw or (0.0, 0.0)), c.jaw_radius, c.k_jaw, c.c_jaw]
     coupling = [k.m_inv, k.i_inv, k.grip[0], k.grip[1], k.k, k.c, k.k_rot, k.c_rot]
     solver = [s.radius, s.friction, s.slop, s.bias_coef, s.dt_coef, TINY, 1e-300, SPRING_LENGTH,
               float("inf")]
     anchors = [v for xy in HAND_ANCHORS for v in xy]
     geometry = [np.asarray(a, dtype=np.float64).ravel() for a in (s.ends, s.seg_normal, s.local, s.local_normals)]
-    groups = [np.array(tongue), np.array(coupling), np.array(solver), np.array(anchors), *geometry]
+    groups = [np.array(tongue), np.array(coupling), np.array(solver), np.array(anchors), *geometry, np.array(jaw)]
     starts = np.cumsum([0] + [len(g) for g in groups])
     assert [int(x) for x in starts[1:7]] == [x.value for x in (_COUPLING, _SOLVER, _ANCHORS, _ENDS, _SEG_NORMAL, _LOCAL)]
     return tuple(float(x) for x in np.concatenate(groups))
@@ -239,6 +243,28 @@ def _collide(C: tl.constexpr, ca, sa, px, py, V: tl.constexpr):
 
 
 @triton.jit
+def _jaw(C: tl.constexpr, px, py, ca, sa, vx, vy, w, V: tl.constexpr):
+    """:func:`.physics.jaw_force` for every device of the program."""
+    hx, hy, tx, ty = _k(C, 18), _k(C, 19), _k(C, 20), _k(C, 21)
+    jaw = _LOCAL + 4 * V
+    jx, jy, radius, k_jaw, c_jaw = _k(C, jaw), _k(C, jaw + 1), _k(C, jaw + 2), _k(C, jaw + 3), _k(C, jaw + 4)
+    ex = px + ca * hx - sa * hy
+    ey = py + sa * hx + ca * hy
+    dx = (px + ca * tx - sa * ty) - ex
+    dy = (py + sa * tx + ca * ty) - ey
+    t = ((jx - ex) * dx + (jy - ey) * dy) / (dx * dx + dy * dy)
+    ux, uy = -sa, ca
+    depth = radius - ((ex - jx) * ux + (ey - jy) * uy)
+    rx = (ex + t * dx) - px
+    ry = (ey + t * dy) - py
+    approach = -((vx - w * ry) * ux + (vy + w * rx) * uy)
+    F = tl.where((depth > 0.0) & (t >= 0.0) & (t <= 1.0), _max0(k_jaw * depth + c_jaw * approach), 0.0)
+    fx = F * ux
+    fy = F * uy
+    return fx, fy, rx * fy - ry * fx
+
+
+@triton.jit
 def _tongue(C: tl.constexpr, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
             lat_y, lat_v, hand_lat, anchor, hl, tfx, tfy, ttq):
     """:func:`.physics.tongue_substep_floats` for every device of the program."""
@@ -379,7 +405,8 @@ def _spring_damping(C: tl.constexpr, r1x, r1y, nx, ny, n_mass, v_coef, target, a
 
 @triton.jit
 def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, count, loads, slopes, top,
-                    iterations, persistence, C: tl.constexpr, V: tl.constexpr, BLOCK_SIZE: tl.constexpr):
+                    iterations, persistence, C: tl.constexpr, V: tl.constexpr, JAW: tl.constexpr,
+                    BLOCK_SIZE: tl.constexpr):
     """``count`` substeps of every device (the rows of the state tensors, updated in place) with the hands
     commanded at ``command`` ``(4, n)``: :func:`.warp_kernel.control_period`, one thread a device."""
     rows = tl.program_id(0) * BLOCK_SIZE + tl.arange(0, BLOCK_SIZE)
@@ -413,9 +440,16 @@ def _control_period(blade, hand, lateral, hand_v, contact, incisor, command, n, 
         hw = _clip(spin, (_k(C, 24) - pitch) / h, (_k(C, 28) - pitch) / h)
         hl = _clip(v_lat, (_k(C, 25) - hand_lat) / h, (_k(C, 29) - hand_lat) / h)
         hand_lat = hand_lat + h * hl
-        fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
-            C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
-            lat_y, lat_v, hand_lat, anchor, hl, tfx, tfy, ttq)
+        if JAW:                                          # the jaw's push now, with the incisors' last
+            jfx, jfy, jtq = _jaw(C, px, py, ca, sa, vx, vy, w, V)
+            fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
+                C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+                lat_y, lat_v, hand_lat, anchor, hl, tfx + jfx, tfy + jfy, ttq + jtq)
+            fx, fy, torque = fx + jfx, fy + jfy, torque + jtq
+        else:
+            fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = _tongue(
+                C, loads, slopes, top, px, py, a, ca, sa, vx, vy, w, gx, gy, pitch, hvx, hvy, hw,
+                lat_y, lat_v, hand_lat, anchor, hl, tfx, tfy, ttq)
         # cpSpaceStep: 1. positions, spending the contact's bias velocities
         gx, gy, pitch = gx + hvx * h, gy + hvy * h, pitch + hw * h
         px, py, a = px + (vx + bvx) * h, py + (vy + bvy) * h, a + (w + bw) * h
@@ -555,7 +589,8 @@ class LaryngoscopeFused(LaryngoscopeTensors):
         return dict(blade=self._blade, hand=self._hand, lateral=self._lateral, hand_v=self._hand_v,
                     contact=self._contact, incisor=self._incisor, command=command, n=self.n, count=count,
                     loads=self._loads, slopes=self._slopes, top=self._top, iterations=SOLVER_ITERATIONS,
-                    persistence=PERSISTENCE, C=self._constants, V=self._vertices, BLOCK_SIZE=BLOCK)
+                    persistence=PERSISTENCE, C=self._constants, V=self._vertices, JAW=self.c.jaw is not None,
+                    BLOCK_SIZE=BLOCK)
 
     def substeps(self, vX: Any, vY: Any, spin: Any, v_lat: Any, count: int) -> None:
         command = torch.stack(torch.broadcast_tensors(vX, vY, spin, v_lat)).to(torch.float64).contiguous()

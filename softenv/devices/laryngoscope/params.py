@@ -17,6 +17,14 @@ own (:mod:`.physics`).
   edge ``incisor_clearance`` above the flange in the start pose (the airway's mouth opening: 3 mm on
   the normal airway), rising 3 cm up and back along the tooth and the maxilla (so the blade cannot
   slip up past it).
+* **Lower incisors** (where the airway has them: ``interincisal_gap``): a rounded edge (radius 4 mm)
+  under the blade at the upper incisors' place, ``lower_clearance`` below the underside in the start
+  pose, on a jaw that yields: a frictionless spring of ``JAW_STIFFNESS``, critically damped, pushing the
+  underside up where it presses the edge (:func:`~.physics.jaw_force`). Computed outside pymunk, as the
+  tongue's contact is: a second Chipmunk contact would be solved in an order that depends on the
+  spatial index's history (its pair cache), which no other engine can follow, and a rebuilt device
+  would not continue bit for bit. A blade pressed down at the mouth rests on the jaw; pressing the
+  tongue deeper then means pressing the jaw or turning the blade between the teeth.
 * **Neck extension**: the hand may pitch the blade at most ``pitch_limit`` either way (0.5 rad on
   the normal airway; :mod:`softenv.airway`).
 
@@ -54,6 +62,10 @@ INCISOR_RADIUS = 0.004        # m
 SHAPE_FRICTION = 0.3          # of the blade's and the incisors' shapes (pymunk's contact takes their product)
 INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
+LOWER_CROWN = (-0.008, -0.03)   # m: the lower tooth and the mandible, down and back from its incisal edge (drawn)
+# N/m: a jaw held by its muscles and joint yields 5 mm under 50 N (a stated choice); stiffer costs substeps
+# (omega_max: 37 a period at 1e4 N/m against 20 without the jaw, 71 at 5e4)
+JAW_STIFFNESS = 1e4
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad)
 HAND_REACH = {"insert": 0.025, "withdraw": 0.05, "up": 0.04}   # further in, the handle would be in the mouth
@@ -87,6 +99,7 @@ class LaryngoscopeParams:
     max_sideways_force: float = 10.0
     incisor_clearance: float = 0.003    # m above the flange in the start pose (the airway's mouth opening)
     pitch_limit: float = 0.5            # rad either way (the airway's neck extension)
+    lower_clearance: float | None = None  # m below the underside in the start pose; None: no lower incisors
 
     @classmethod
     def from_config(cls, config: SceneConfig) -> "LaryngoscopeParams":
@@ -95,9 +108,16 @@ class LaryngoscopeParams:
                 "rotational_damping", "max_hand_speed", "max_sweep_speed", "max_pitch_rate", "friction", "max_substep",
                 "max_normal_force", "max_sideways_force")
         patient = airway(config["airway"])
+        lower = None
+        if patient.interincisal_gap is not None:
+            least = patient.mouth_opening + cls.flange_height * 1e3
+            if patient.interincisal_gap < least:
+                raise ValueError(f"airway.interincisal_gap = {patient.interincisal_gap:g} mm leaves the blade no room: "
+                                 f"allowed >= mouth_opening + the flange's {cls.flange_height * 1e3:g} mm = {least:g} mm")
+            lower = (patient.interincisal_gap - least) * 1e-3
         return cls(radius=config["tissue"]["radius"], dt=config["dynamics"]["dt"], preset=dev["haptic_preset"],
                    incisor_clearance=patient.mouth_opening * 1e-3, pitch_limit=patient.neck_extension,
-                   **{k: dev[k] for k in keys})
+                   lower_clearance=lower, **{k: dev[k] for k in keys})
 
     @property
     def haptic(self) -> HapticPreset:
@@ -177,6 +197,22 @@ class LaryngoscopeParams:
         return (ix, iy), (ix + INCISOR_CROWN[0], iy + INCISOR_CROWN[1])
 
     @property
+    def jaw(self) -> tuple[float, float] | None:
+        """Centre of the lower incisal edge's rounding (local frame), or None: no lower incisors."""
+        if self.lower_clearance is None:
+            return None
+        hx, hy = self.heel_start
+        return (hx - INCISOR_SETBACK, hy - self.lower_clearance - INCISOR_RADIUS)
+
+    @property
+    def lower_incisor_segment(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The lower incisors as drawn: a bar from the edge down and back along the tooth, or None."""
+        if self.jaw is None:
+            return None
+        ix, iy = self.jaw
+        return (ix, iy), (ix + LOWER_CROWN[0], iy + LOWER_CROWN[1])
+
+    @property
     def hand_box(self) -> tuple[tuple[float, float, float, float], tuple[float, float, float, float]]:
         """``(low, high)`` of the hand: grip x, grip z (m), pitch (rad), lateral y (m). The floor keeps a
         level blade above the tongue's centre (it can never be pushed through the tongue)."""
@@ -222,7 +258,8 @@ class LaryngoscopeParams:
         return low
 
     def _mode_omega(self, contact_stiffness: float, lateral_stiffness: float) -> float:
-        """The stiffest mode (rad/s) with the contact at this stiffness (see :meth:`omega_max`)."""
+        """The stiffest mode (rad/s) with the contact at this stiffness (see :meth:`omega_max`), and the
+        jaw's spring, where there is one, pushing the underside up at any point of it."""
         gx, gy = self.grip
         k = self.coupling_stiffness
         base = k * (np.outer([1, 0, -gy], [1, 0, -gy]) + np.outer([0, 1, gx], [0, 1, gx])) \
@@ -235,6 +272,9 @@ class LaryngoscopeParams:
         nx, ny = np.cos(beta) + 0.0 * rx, np.sin(beta) + 0.0 * rx
         j = np.stack([nx, ny, rx * ny - ry * nx], axis=-1).reshape(-1, 3)      # every point and direction
         K = base + contact_stiffness * j[:, :, None] * j[:, None, :]
+        if self.jaw is not None:             # the jaw at each point of the underside, with the tongue's anywhere
+            up = np.stack([0.0 * t[:, 0], 1.0 + 0.0 * t[:, 0], rx[:, 0]], axis=-1)   # body frame: level blade
+            K = (K[None] + JAW_STIFFNESS * up[:, None, :, None] * up[:, None, None, :]).reshape(-1, 3, 3)
         worst = float(np.linalg.eigvalsh(K * np.outer(scale, scale)).max())
         return math.sqrt(max(worst, (k + lateral_stiffness) / self.mass))
 

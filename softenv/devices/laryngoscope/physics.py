@@ -10,6 +10,9 @@
 * **Tongue contact** (computed outside pymunk, applied each substep: :func:`tongue_substep`): the
   point of the blade's underside nearest the sphere's centre penetrates by ``delta``; the normal
   force follows :class:`~softenv.devices.contact.TongueContact`, applied along the sphere's normal.
+* **Jaw** (where the airway has lower incisors: :func:`jaw_force`): a frictionless, critically damped
+  spring pushing the underside up where it presses the lower incisal edge, computed outside pymunk and
+  applied each substep with the tongue's force.
 * **Lateral sweep**: the blade's lateral position ``y`` is a mass on a spring-damper to the hand's
   lateral position (the same ``k`` and ``c`` as the coupling), and the tongue holds it by the
   stick-slip law of :class:`TongueContact`: coupled to the sagittal motion through the normal force
@@ -32,11 +35,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from math import sqrt
-from typing import Any
+from typing import Any, cast
 
 from ..._ops import PhysicsOps, ScalarOps
 from ..contact import TongueContact
-from .params import LaryngoscopeParams
+from .params import INCISOR_RADIUS, JAW_STIFFNESS, LaryngoscopeParams
 
 CONTACT_DAMPING_RATIO = 1.0    # the tongue contact: critically damped (tissue is viscous)
 NO_TEETH = (0.0, 0.0, 0.0)     # the incisors' force and torque on a blade clear of them
@@ -67,6 +70,10 @@ class Constants:
     tip: tuple[float, float]
     low: tuple[float, ...]
     high: tuple[float, ...]
+    jaw: tuple[float, float] | None = None   # the lower incisal edge's centre; None: no lower incisors
+    jaw_radius: float = 0.0
+    k_jaw: float = 0.0
+    c_jaw: float = 0.0
 
 
 
@@ -75,11 +82,13 @@ def substep_constants(p: LaryngoscopeParams, contact: TongueContact, h: float) -
     k_explicit = p.explicit_contact_stiffness(contact)
     damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(k_explicit * m_eff), m_eff / h)
     low, high = p.hand_box
+    jaw_damping = min(2.0 * CONTACT_DAMPING_RATIO * math.sqrt(JAW_STIFFNESS * m_eff), m_eff / h)
     return Constants(R=p.radius, h=h, inv_m=1.0 / p.mass, inv_I=1.0 / p.moment, h_over_m=h / p.mass,
                       k=p.coupling_stiffness, c=p.coupling_damping, k_t=contact.lateral_stiffness, mu=p.friction,
                       k_ref=k_explicit, damping=damping, step=contact.step, inv_step=contact.inv_step,
                       top=contact.top, k_rot=p.rotational_stiffness, c_rot=p.rotational_damping, grip=p.grip,
-                      heel=p.heel, tip=p.tip, low=low, high=high)
+                      heel=p.heel, tip=p.tip, low=low, high=high, jaw=p.jaw, jaw_radius=INCISOR_RADIUS,
+                      k_jaw=JAW_STIFFNESS if p.jaw is not None else 0.0, c_jaw=jaw_damping if p.jaw is not None else 0.0)
 
 
 
@@ -97,6 +106,41 @@ def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: P
     return cx, cy, ops.sqrt(cx * cx + cy * cy) + 1e-300
 
 
+def jaw_contact(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants) -> tuple[Any, Any, Any, Any]:
+    """Where the underside meets the lower incisal edge (``c.jaw`` must be set): the edge's depth into
+    the underside (along its normal; positive: pressing), the point over the edge's centre as a fraction
+    ``t`` of heel to tip, and that point relative to the blade's centre ``(rx, ry)``."""
+    hx, hy = c.heel
+    tx, ty = c.tip
+    jx, jy = cast(tuple[float, float], c.jaw)
+    ex = px + cos_a * hx - sin_a * hy
+    ey = py + sin_a * hx + cos_a * hy
+    dx = (px + cos_a * tx - sin_a * ty) - ex
+    dy = (py + sin_a * tx + cos_a * ty) - ey
+    t = ((jx - ex) * dx + (jy - ey) * dy) / (dx * dx + dy * dy)
+    depth = c.jaw_radius - ((ex - jx) * -sin_a + (ey - jy) * cos_a)
+    return depth, t, (ex + t * dx) - px, (ey + t * dy) - py
+
+
+def jaw_force(blade: tuple, c: Constants, ops: PhysicsOps) -> tuple[Any, Any, Any]:
+    """The jaw's push on the blade ``(x, y)`` and its torque, for ``blade`` as :func:`tongue_substep`
+    reads it (``c.jaw`` must be set). Where the lower incisal edge's rounding (centre ``c.jaw``, radius
+    ``c.jaw_radius``) presses the underside between heel and tip (:func:`jaw_contact`), a frictionless
+    spring of ``c.k_jaw`` with the damper ``c.c_jaw`` pushes the underside up (along its normal) at the
+    point over the edge's centre; nothing pulls. Explicit, like the tongue's reference stiffness:
+    :meth:`~.params.LaryngoscopeParams.omega_max` counts it. Every engine writes the same operations (the
+    Warp and Triton kernels, the single device on floats with ``ScalarOps``)."""
+    px, py, a, cos_a, sin_a, vx, vy, w = blade
+    depth, t, rx, ry = jaw_contact(px, py, cos_a, sin_a, c)
+    ux, uy = -sin_a, cos_a                                     # the underside's normal, into the blade
+    approach = -((vx - w * ry) * ux + (vy + w * rx) * uy)     # speed of that point into the jaw
+    pressed = (depth > 0.0) & (t >= 0.0) & (t <= 1.0)
+    F = ops.positive(c.k_jaw * depth + c.c_jaw * approach) * pressed
+    fx = F * ux
+    fy = F * uy
+    return fx, fy, rx * fy - ry * fx
+
+
 def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, teeth: tuple, loads: Any, slopes: Any,
                    c: Constants, ops: PhysicsOps) -> tuple[Any, ...]:
     """One substep of the tongue's contact: the arithmetic both devices share (the batch runs it on
@@ -105,7 +149,8 @@ def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, teeth: tu
     ``blade`` is ``(x, y, angle, cos, sin, vx, vy, spin)``, ``hand`` is ``(x, y, pitch, vx, vy, spin)``,
     ``lateral`` is ``(blade y, blade vy, hand y, anchor)`` with the hand's ``y`` already moved this
     substep at its velocity ``hl``, ``teeth`` the incisors' force and torque on the blade in the last
-    substep (:func:`teeth_force`; zeros without that contact). Returns ``(fx, fy, torque, P, Q, cx, cy,
+    substep (:func:`teeth_force`; zeros without that contact), plus the jaw's in this one where there is
+    a jaw (:func:`jaw_force`). Returns ``(fx, fy, torque, P, Q, cx, cy,
     lat_y, lat_v, anchor)``: the tongue's push on the blade and its torque, the normal and sideways force,
     the contact point, and the lateral state after the substep.
 
@@ -115,7 +160,7 @@ def tongue_substep(blade: tuple, hand: tuple, lateral: tuple, hl: Any, teeth: tu
     ``c_ex = 2 sqrt(K_ex m)`` so that the stiff barrier does not ring, is applied by backward Euler
     along the normal, with the blade's effective mass ``m`` there and the push of the other forces on
     the blade predicted: the coupling's from the current state, the incisors' from the last substep
-    (a blade levered on the teeth is pushed by both; predicting the coupling's alone left a levered
+    and the jaw's (a blade levered on the teeth is pushed by both; predicting the coupling's alone left a levered
     press 9-13 % under the law). With ``s = K_ex h + c_ex``,
     ``P (1 + s h / m) = P(delta) + (c + s) v + s h a``, where ``v`` is the approach speed and ``a`` the
     acceleration those forces give that point into the tongue. At rest ``a = P / m``, so a held press

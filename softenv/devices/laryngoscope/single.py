@@ -15,7 +15,8 @@ from pymunk._chipmunk import lib as _lib
 from ..._ops import ScalarOps
 from ..contact import TongueContact
 from .params import LaryngoscopeParams
-from .physics import NO_TEETH, contact_features, hand_command, near_walls, nearest_point, squash, tongue_substep_floats
+from .physics import (NO_TEETH, contact_features, hand_command, jaw_force, near_walls, nearest_point, squash,
+                      tongue_substep_floats)
 from .space import DeviceSpace, listen_to_incisors, teeth_on_blade
 from .state import DeviceState, LaryngoscopeBase
 
@@ -77,6 +78,7 @@ class Laryngoscope(LaryngoscopeBase):
             self._space.flush(0)
             self._touched = False
         c, lo, hi, h = self.c, self.c.low, self.c.high, self.c.h
+        jaw = c.jaw is not None
         blade, hand, space, step = self._cblade, self._chand, self._cspace, self._space.step
         get_p, get_v, get_a, get_w = _lib.cpBodyGetPosition, _lib.cpBodyGetVelocity, _lib.cpBodyGetAngle, \
             _lib.cpBodyGetAngularVelocity
@@ -113,10 +115,16 @@ class Laryngoscope(LaryngoscopeBase):
                     hl = low if x < low else (high if x > high else x)
                 hand_lat = hand_lat + h * hl
                 ca, sa = cos(a), sin(a)
+                teeth = self._teeth
+                if jaw:                                     # the jaw's push now, with the incisors' last
+                    jfx, jfy, jtq = jaw_force((px, py, a, ca, sa, vx, vy, w), c, ScalarOps)
+                    teeth = (teeth[0] + jfx, teeth[1] + jfy, teeth[2] + jtq)
                 fx, fy, torque, P, Q, cx, cy, lat_y, lat_v, anchor = tongue_substep_floats(
                     (px, py, a, ca, sa, vx, vy, w), (gx, gy, pitch, hvx, hvy, hw), (lat_y, lat_v, hand_lat, anchor), hl,
-                    self._teeth, loads, slopes, c)
-                if P != 0.0:                                # off the tongue Chipmunk's reset force of 0 stands
+                    teeth, loads, slopes, c)
+                if jaw:
+                    fx, fy, torque = fx + jfx, fy + jfy, torque + jtq
+                if P != 0.0 or jaw:                         # off the tongue and the jaw Chipmunk's reset force of 0 stands
                     set_force(blade, (fx, fy))
                     set_torque(blade, torque)
                 if written != (hvx, hvy, hw):

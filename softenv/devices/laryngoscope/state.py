@@ -20,7 +20,7 @@ from ..contact import TongueContact
 from ..haptic_presets import render_components
 from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, SPEED_SCALE, SPIN_SCALE
 from .params import INCISOR_RADIUS, SHAPE_FRICTION, SPRING_LENGTH, LaryngoscopeParams
-from .physics import (contact_features, coupling_force, grip_offset, hand_command, nearest_point, squash,
+from .physics import (contact_features, coupling_force, grip_offset, hand_command, jaw_contact, nearest_point, squash,
                       substep_constants)
 
 COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
@@ -148,7 +148,8 @@ class LaryngoscopeBase:
         return self._pull
 
     def energy(self) -> np.ndarray:
-        """Mechanical energy (J) of each device: kinetic, coupling springs, tongue (normal and lateral)."""
+        """Mechanical energy (J) of each device: kinetic, coupling springs, tongue (normal and lateral) and
+        the jaw's spring where there is one."""
         s, p = self.state(), self.params
         x, y, a, vx, vy, w = s.blade.T
         gx, gy, pitch = s.hand.T
@@ -168,7 +169,11 @@ class LaryngoscopeBase:
         touching = depth > 0
         tongue = np.where(touching, self.contact.potential(depth) + 0.5 * self.contact.lateral_stiffness
                           * (ly - anchor) ** 2, 0.0)
-        return kinetic + coupling + tongue
+        if self.c.jaw is None:
+            return kinetic + coupling + tongue
+        jaw_depth, t = jaw_contact(x, y, np.cos(a), np.sin(a), self.c)[:2]
+        jaw = np.where((jaw_depth > 0) & (t >= 0) & (t <= 1), 0.5 * self.c.k_jaw * jaw_depth ** 2, 0.0)
+        return kinetic + coupling + tongue + jaw
 
     def clinical_values(self) -> tuple[Any, ...]:
         """Each device's values in :data:`softenv.devices.laryngoscope.clinical.COLUMNS` order: tongue and incisor force (N),
@@ -201,11 +206,12 @@ class LaryngoscopeBase:
     def drawing(self) -> list[dict[str, Any]]:
         """What a renderer draws of each device, in the local sagittal frame (m)."""
         s, p = self.state(), self.params
-        outline = np.array(p.outline)
+        outline, lower = np.array(p.outline), p.lower_incisor_segment
         out = []
         for (x, y, a), (gx, gy, pitch), (P, Q, cx, cy, incisor) in zip(s.blade[:, :3], s.hand, s.contact):
             rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
             out.append({"outline": outline @ rot.T + (x, y), "incisor": (*p.incisor_segment, INCISOR_RADIUS),
+                        "lower_incisor": None if lower is None else (*lower, INCISOR_RADIUS),
                         "handle": np.array([p.heel, p.handle_top]) @ rot.T + (x, y),
                         "hand": (gx, gy, pitch), "contact": (cx, cy) if P > 0 else None,
                         "tongue_force": float(math.hypot(P, Q)), "incisor_force": float(incisor),

@@ -36,6 +36,9 @@ def params_of(c: Constants, s: IncisorContact) -> Params:
     p.slop = f64(s.slop)
     p.bias_coef = f64(s.bias_coef)
     p.dt_coef = f64(s.dt_coef)
+    if c.jaw is not None:
+        p.jaw, p.jaw_present = wp.vec2d(*c.jaw), 1
+    p.jaw_radius, p.k_jaw, p.c_jaw = f64(c.jaw_radius), f64(c.k_jaw), f64(c.c_jaw)
     if len(s.local) > MAX_VERTICES:
         raise ValueError(f"the blade's outline has {len(s.local)} vertices; the Warp kernel holds at most {MAX_VERTICES}")
     p.vertices = len(s.local)

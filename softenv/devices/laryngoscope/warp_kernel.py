@@ -79,6 +79,11 @@ class Params:
     slop: f64
     bias_coef: f64
     dt_coef: f64
+    jaw: wp.vec2d        # the lower incisal edge's centre, its radius, the jaw's spring and damper
+    jaw_radius: f64
+    k_jaw: f64
+    c_jaw: f64
+    jaw_present: int     # 0: no lower incisors
     vertices: int        # the blade polygon's vertex count
     max_hand_speed: f64  # the hand's speeds at |action| = 1 (m/s, rad/s)
     max_pitch_rate: f64
@@ -485,6 +490,27 @@ def collide(p: Params, vw: Outline, nw: Outline) -> Collision:
 
 
 @wp.func
+def jaw_force(p: Params, px: f64, py: f64, ca: f64, sa: f64, vx: f64, vy: f64, w: f64) -> wp.vec3d:
+    """The jaw's push on the blade (x, y) and its torque (:func:`~.physics.jaw_force`, the same expressions)."""
+    ex = px + ca * p.heel[0] - sa * p.heel[1]
+    ey = py + sa * p.heel[0] + ca * p.heel[1]
+    dx = (px + ca * p.tip[0] - sa * p.tip[1]) - ex
+    dy = (py + sa * p.tip[0] + ca * p.tip[1]) - ey
+    t = ((p.jaw[0] - ex) * dx + (p.jaw[1] - ey) * dy) / (dx * dx + dy * dy)
+    ux, uy = -sa, ca
+    depth = p.jaw_radius - ((ex - p.jaw[0]) * ux + (ey - p.jaw[1]) * uy)
+    rx = (ex + t * dx) - px
+    ry = (ey + t * dy) - py
+    approach = -((vx - w * ry) * ux + (vy + w * rx) * uy)
+    F = ZERO
+    if depth > ZERO and t >= ZERO and t <= ONE:
+        F = max0(p.k_jaw * depth + p.c_jaw * approach)
+    fx = F * ux
+    fy = F * uy
+    return wp.vec3d(fx, fy, rx * fy - ry * fx)
+
+
+@wp.func
 def hand_command(action: wp.vec4d, pitch: f64, p: Params) -> wp.vec4d:
     """The hand's velocities (x, z, pitch rate, lateral) for a normalised action at hand pitch ``pitch``
     (:func:`~.physics.hand_command`, the same expressions)."""
@@ -520,6 +546,12 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
     hw = clip(command[2], (p.low[2] - pitch) / h, (p.high[2] - pitch) / h)
     hl = clip(command[3], (p.low[3] - d.hand_lat) / h, (p.high[3] - d.hand_lat) / h)
     hand_lat = d.hand_lat + h * hl
+    # the jaw's push now (physics.jaw_force), which the tongue's barrier predicts with the incisors' last
+    jaw = wp.vec3d()
+    teeth_x, teeth_y, teeth_t = f64(d.tfx), f64(d.tfy), f64(d.ttq)
+    if p.jaw_present == 1:
+        jaw = jaw_force(p, px, py, ca, sa, vx, vy, w)
+        teeth_x, teeth_y, teeth_t = teeth_x + jaw[0], teeth_y + jaw[1], teeth_t + jaw[2]
     # the tongue (physics.tongue_substep_floats)
     lat_y, lat_v, anchor = f64(d.lat_y), f64(d.lat_v), f64(d.anchor)
     ex_ = px + ca * p.heel[0] - sa * p.heel[1]
@@ -554,12 +586,14 @@ def substep(d: Device, p: Params, tune: Tune, command: wp.vec4d, loads: wp.array
         Fx = k_c * (gx - px - qx) + c_c * (hvx - vx + w * qy)
         Fy = k_c * (gy - py - qy) + c_c * (hvy - vy - w * qx)
         tau = qx * Fy - qy * Fx + k_rot * (pitch - a) + c_rot * (hw - w)
-        push = -((Fx + d.tfx) * nx + (Fy + d.tfy) * ny) * p.inv_m - (tau + d.ttq) * rn * p.inv_I
+        push = -((Fx + teeth_x) * nx + (Fy + teeth_y) * ny) * p.inv_m - (tau + teeth_t) * rn * p.inv_I
         beta = stiff * h * inv_meff
         P = max0((law + (p.damping + stiff) * approach + stiff * h * push) / (ONE + beta))
         fx = P * nx
         fy = P * ny
         torque = rx * fy - ry * fx
+    if p.jaw_present == 1:
+        fx, fy, torque = fx + jaw[0], fy + jaw[1], torque + jaw[2]
     k_t = s_t * p.k_t
     k_s = k_t * f64(on_tongue)
     lat_v = (lat_v + p.h_over_m * (k_c * (hand_lat - lat_y) + c_c * hl - k_s * (lat_y - anchor))) / \
