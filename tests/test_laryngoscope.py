@@ -138,7 +138,11 @@ def test_substeps_follow_the_stiffest_spring():
     assert stiff.n_substeps == math.ceil(stiff.params.dt * omega / ACCURACY - 1e-9)
     hard = make_device(tissue={"E": 1e7})
     assert hard.n_substeps > 3 * base.n_substeps              # a stiff tongue's lateral grip needs shorter steps
-    for dev in (base, stiff, hard):
+    jaw = make_device(**JAW)                                  # the jaw's spring, explicit, is counted
+    omega = jaw.params.omega_max(jaw.contact)
+    assert omega > math.sqrt(JAW_STIFFNESS / jaw.params.mass) and jaw.n_substeps > base.n_substeps
+    assert jaw.n_substeps == math.ceil(jaw.params.dt * omega / ACCURACY - 1e-9)
+    for dev in (base, stiff, hard, jaw):
         # the normal contact's explicit part adds no substeps to those the rest of the device needs;
         # what it leaves out goes to the implicit barrier
         p, contact = dev.params, dev.contact
