@@ -18,6 +18,7 @@ from softenv.devices.laryngoscope.batch import LaryngoscopeBatch
 from softenv.devices.laryngoscope.warp_arrays import LaryngoscopeWarp
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.part import laryngoscope_parts
+from softenv.devices.laryngoscope.physics import jaw_contact
 from softenv.devices.laryngoscope.single import Laryngoscope
 from softenv.devices.laryngoscope.state import IncisorContact, polygon_planes
 from softenv.envs import HAPTIC_SCENES
@@ -173,21 +174,20 @@ def _loss(rollout, weights):
                (rollout[k] * torch.as_tensor(w)).sum() for k, w in weights.items())
 
 
-@pytest.mark.parametrize("stretch", ["free", "on-the-tongue"])
+@pytest.mark.parametrize("stretch", ["free", "on-the-tongue", "on-the-jaw"])
 def test_gradients_through_the_warp_kernel_match_central_differences(stretch):
     """Two control periods (40 substeps) of one device, through torch autograd (Warp's adjoint of every
     substep, :func:`differentiable_rollout`), against central differences (step 1e-6, float64) of the fast
     kernel (:func:`control_period`) from the perturbed start: the gradient of a weighted sum of every
     period's blade, lateral and contact state with respect to the start state (blade, hand, lateral) and
     the actions, within 1e-6 of the largest component (measured: 5e-8 for the actions, 1e-10 for the
-    start state). Free in the air,
-    and pressed into the tongue (its contact on throughout, a smooth stretch of its load table); the
-    incisors untouched in both."""
-    parts = _parts({})
+    start state). Free in the air, pressed into the tongue (its contact on throughout, a smooth stretch of
+    its load table), and pressed onto lower incisors (the jaw's spring on throughout, the tongue off); the
+    upper incisors untouched in all three."""
+    parts = _parts({"airway": {"interincisal_gap": 26.0}} if stretch == "on-the-jaw" else {})
     engine, reference = LaryngoscopeWarpTensors(*parts, 1), LaryngoscopeWarp(*parts, 1)
-    if stretch == "on-the-tongue":
-        for _ in range(30):
-            reference.control_step(np.array([[0.0, 0.6, 0.2, 0.0]]))
+    for _ in range(30 if stretch != "free" else 0):
+        reference.control_step(np.array([[0.0, 0.6, 0.2, 0.0]]))
     start = reference.state()
     actions = np.array([[[0.3, 0.2, -0.2, 0.1]], [[-0.1, 0.3, 0.1, 0.2]]])
     weights = _loss_weights(len(actions), 1)
@@ -206,6 +206,9 @@ def test_gradients_through_the_warp_kernel_match_central_differences(stretch):
     _, plain = fast(start.blade, start.hand, start.lateral, actions)
     assert (np.stack(plain["contact"])[..., 0] > 0).all() == (stretch == "on-the-tongue")
     assert (np.stack(plain["contact"])[..., 0] > 0).any() == (stretch == "on-the-tongue")
+    if stretch == "on-the-jaw":
+        x, y, a = np.stack(plain["blade"])[..., :3].reshape(-1, 3).T
+        assert (jaw_contact(x, y, np.cos(a), np.sin(a), reference.c)[0] > 0).all()
     inputs = [torch.tensor(x, requires_grad=True) for x in (start.blade, start.hand, start.lateral, actions)]
     rollout = differentiable_rollout(engine, *inputs)
     assert (rollout["incisor"] == 0).all()
