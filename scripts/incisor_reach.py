@@ -1,7 +1,7 @@
 """Why the scripted expert never loads the teeth: how deep a view lifting reaches on each airway grade, and
-where levering on the upper incisors would take the blade.
+where levering on the upper incisors would take the blade; and how lower incisors change that.
 
-    python scripts/incisor_reach.py --out results [--step-deg 0.5]
+    python scripts/incisor_reach.py --out results [--step-deg 0.5] [--gaps 40 34 32 30 28 26]
 
 For each grade of SoftSphereAirway-v0, at its family's centre force ``P*`` (softenv.airway):
 
@@ -16,7 +16,13 @@ For each grade of SoftSphereAirway-v0, at its family's centre force ``P*`` (soft
 
 The blade's flange sits under the incisors and lifting moves it away from them, so a view the lift reaches
 never needs the teeth; the lever reaches at most a little deeper, and where the neck's limit stops it, not
-that far. Writes ``incisor_reach.md`` and ``incisor_reach.json`` into ``--out``.
+that far. Then, with lower incisors under the blade (``airway.interincisal_gap`` at each of ``--gaps``, mm):
+
+* **lifting** toward the centre target: whether it reaches it, the tongue's force at the end and the jaw's
+  peak force;
+* **levering** as above: the force it holds, the teeth's and the jaw's force there.
+
+Writes ``incisor_reach.md`` and ``incisor_reach.json`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -35,7 +41,7 @@ from softenv._artifact import write_text
 from softenv.airway import GRADES, airway, target_ranges
 from softenv.bench.timing import code_revision
 from softenv.devices.laryngoscope.control import HandController
-from softenv.devices.laryngoscope.params import INCISOR_RADIUS
+from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.physics import hand_action
 from softenv.envs import airway_scene
 from softenv.training.hand import haptic_config, reach_env
@@ -56,17 +62,26 @@ def lever_action(laryngoscope: Any, force: float) -> list[float]:
     return np.clip(hand_action(-spin * ry, spin * rx, spin, 0.0, pitch, p), -1.0, 1.0).tolist()
 
 
+def scene(grade: int, gap: float | None = None) -> dict[str, Any]:
+    """``grade``'s scene, with lower incisors ``gap`` mm under the upper ones where ``gap`` is given."""
+    sections = airway_scene(grade)
+    if gap is not None:
+        sections["airway"] = {**sections["airway"], "interincisal_gap": gap}
+    return sections
+
+
 def centre(grade: int) -> tuple[float, float]:
     """The centre of ``grade``'s target family: insertion angle (deg) and normal force (N)."""
-    config = haptic_config(airway_scene(grade))
+    config = haptic_config(scene(grade))
     ranges = target_ranges(config["task"], config["airway"])
     return float(np.mean(ranges["target_insertion_deg"])), float(np.mean(ranges["target_normal_force"]))
 
 
-def _start(grade: int, insertion_deg: float) -> tuple[Any, Any, np.ndarray, Any, slice]:
-    """A reach env on ``grade`` reset toward the family's centre moved to ``insertion_deg``; its controller and
-    the device's slice of the observation (what the controller reads)."""
-    config = haptic_config(airway_scene(grade))
+def _start(grade: int, insertion_deg: float, gap: float | None = None) -> tuple[Any, Any, np.ndarray, Any, slice]:
+    """A reach env on ``grade`` (lower incisors ``gap`` mm under the upper, where given) reset toward the family's
+    centre moved to ``insertion_deg``; its controller and the device's slice of the observation (what the
+    controller reads)."""
+    config = haptic_config(scene(grade, gap))
     env = reach_env(config, HORIZON)
     world = env.world
     target = world.family.centre.copy()           # insertion and lateral arc (m), normal and sideways force (N)
@@ -75,21 +90,25 @@ def _start(grade: int, insertion_deg: float) -> tuple[Any, Any, np.ndarray, Any,
     return env, obs, target, HandController(world.config), slice(2 * world.k, 2 * world.k + world.device_obs_size)
 
 
-def lift(grade: int, insertion_deg: float) -> dict[str, Any]:
-    """The expert's controller toward the centre target at ``insertion_deg``: reached, the teeth's peak force."""
-    env, obs, target, controller, device = _start(grade, insertion_deg)
-    teeth = 0.0
+def lift(grade: int, insertion_deg: float, gap: float | None = None) -> dict[str, Any]:
+    """The expert's controller toward the centre target at ``insertion_deg``: reached, the teeth's and the jaw's
+    peak force, the tongue's force at the end."""
+    env, obs, target, controller, device = _start(grade, insertion_deg, gap)
+    teeth = jaw = 0.0
     for _ in range(HORIZON):
         obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
         teeth = max(teeth, info["incisor_force_N"])
+        jaw = max(jaw, float(env.device.laryngoscope.jaw_force))
     return {"insertion_deg": insertion_deg, "reached": bool(info["is_success"]), "peak_incisor_N": teeth,
+            "peak_jaw_N": jaw, "tongue_N": float(env.device.laryngoscope.normal_force),
             "shape_error_mm": info["shape_error_mm"]}
 
 
-def lever(grade: int, held: int = 50) -> dict[str, Any]:
+def lever(grade: int, gap: float | None = None, held: int = 50) -> dict[str, Any]:
     """Insert as the expert does until the blade rests on the tongue, then turn about the incisal edge to the
-    centre's normal force and hold: the blade's insertion angle, the teeth's force, or the neck's limit."""
-    env, obs, target, controller, device = _start(grade, centre(grade)[0])
+    centre's normal force and hold: the blade's insertion angle, the teeth's and the jaw's force, or the neck's
+    limit."""
+    env, obs, target, controller, device = _start(grade, centre(grade)[0], gap)
     laryngoscope = env.device.laryngoscope
     force = float(target[2])
     for _ in range(HORIZON):
@@ -101,7 +120,8 @@ def lever(grade: int, held: int = 50) -> dict[str, Any]:
     p, pitch = laryngoscope.params, laryngoscope.hand_pose[2]
     return {"force_N": force, "held_N": float(laryngoscope.normal_force),
             "insertion_deg": 90.0 + math.degrees(float(laryngoscope.kinematics()[2])),
-            "incisor_N": float(laryngoscope.incisor_force), "hand_pitch_deg": math.degrees(pitch),
+            "incisor_N": float(laryngoscope.incisor_force), "jaw_N": float(laryngoscope.jaw_force),
+            "hand_pitch_deg": math.degrees(pitch),
             "at_neck_limit": abs(pitch) >= p.pitch_limit - 1e-6}
 
 
@@ -120,10 +140,23 @@ def lift_reach(grade: int, step_deg: float, limit_deg: float = 130.0) -> dict[st
     return {"deepest": deepest, "first_failed": first_failed}
 
 
+def least_gap(grade: int) -> float:
+    """The smallest interincisal gap (mm) the blade fits in on ``grade``: its mouth opening plus the flange."""
+    return airway(haptic_config(scene(grade))["airway"]).mouth_opening + LaryngoscopeParams.flange_height * 1e3
+
+
+def jaw_row(grade: int, gap: float) -> dict[str, Any]:
+    """Lifting and levering toward ``grade``'s centre with lower incisors ``gap`` mm under the upper."""
+    return {"gap_mm": gap, "clearance_mm": gap - least_gap(grade), "lift": lift(grade, centre(grade)[0], gap),
+            "lever": lever(grade, gap)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("results"))
     parser.add_argument("--step-deg", type=float, default=0.5)
+    parser.add_argument("--gaps", type=float, nargs="+", default=[40.0, 34.0, 32.0, 30.0, 28.0, 26.0],
+                        help="interincisal gaps (mm) to try on every grade")
     args = parser.parse_args()
     rows = []
     for grade in GRADES:
@@ -133,9 +166,11 @@ def main() -> None:
                      "mouth_opening_mm": airway(config["airway"]).mouth_opening,
                      "insertion_range_deg": list(target_ranges(config["task"], config["airway"])["target_insertion_deg"]),
                      "centre_insertion_deg": insertion, "centre_force_N": force,
-                     "lift": lift_reach(grade, args.step_deg), "lever": lever(grade)})
+                     "lift": lift_reach(grade, args.step_deg), "lever": lever(grade),
+                     "jaw": [jaw_row(grade, gap) for gap in args.gaps if gap >= least_gap(grade)]})
         print(f"grade {grade} done", flush=True)
-    made = {"command": shlex.join(["python", *sys.argv]), "commit": code_revision(), "step_deg": args.step_deg}
+    made = {"command": shlex.join(["python", *sys.argv]), "commit": code_revision(), "step_deg": args.step_deg,
+            "gaps_mm": args.gaps}
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "incisor_reach.json", json.dumps({"made": made, "grades": rows}, indent=1) + "\n")
     write_text(args.out / "incisor_reach.md", report(rows, made))
@@ -176,9 +211,27 @@ def report(rows: list[dict[str, Any]], made: dict[str, Any]) -> str:
                  f"lies {min(deeper):+.1f} to {max(deeper):+.1f} deg from the lift's deepest" if held else "")
               + (f"; on grade {', '.join(map(str, stopped))} the neck's limit stops the turn short of the force"
                  if stopped else "")
-              + ". Nothing in the model bounds the lift from below (no mandible, no lower teeth); in a real mouth "
-              "that bound is what makes a restricted jaw force levering. So here an expert who lifts has no reason "
-              "to load the teeth on any grade.", ""]
+              + ". No grade has lower incisors, so nothing bounds the lift from below: on the grades an expert who "
+              "lifts has no reason to load the teeth.", "",
+              "## With lower incisors", "",
+              f"The same two attempts toward each grade's centre with `airway.interincisal_gap` set (lower incisors "
+              f"that gap under the upper ones; the clearance is the gap less the mouth opening and the flange's "
+              f"{LaryngoscopeParams.flange_height * 1e3:g} mm: how far under the blade's underside they start). The jaw "
+              f"yields as a 10 kN/m spring.", "",
+              "| grade | gap (mm) | clearance (mm) | lift: reached | lift: tongue at the end (N) | lift: jaw peak (N) | "
+              "lever: force held (N) | lever: teeth (N) | lever: jaw (N) |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for j in r["jaw"]:
+            li, lev = j["lift"], j["lever"]
+            force = f"{lev['held_N']:.1f}" + (" (neck limit)" if lev["at_neck_limit"] else "")
+            lines.append(f"| {r['grade']} | {j['gap_mm']:g} | {j['clearance_mm']:g} | {'yes' if li['reached'] else 'no'} | "
+                         f"{li['tongue_N']:.1f} | {li['peak_jaw_N']:.1f} | {force} | {lev['incisor_N']:.1f} | "
+                         f"{lev['jaw_N']:.1f} |")
+    stopped = {r["grade"]: max((j["gap_mm"] for j in r["jaw"] if not j["lift"]["reached"]), default=None) for r in rows}
+    lines += ["", "Widest gap at which the lift no longer reaches the centre: "
+              + ", ".join(f"grade {g}: {'none tried' if v is None else f'{v:g} mm'}" for g, v in stopped.items())
+              + ". Where the lift stops on the jaw, the tongue's force stalls below the target's and the jaw carries "
+              "the rest of the hand's push; only turning the blade on the teeth takes the tongue further.", ""]
     return "\n".join(lines)
 
 

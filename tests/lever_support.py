@@ -1,6 +1,6 @@
 """Shared by the laryngoscope engine tests: a blade levered on the incisors until the tongue's normal
-force reaches a target, the case where the tongue contact's barrier must predict the teeth's push; and the
-jaw's push on a blade, read from its state. The lever is ``scripts/incisor_reach.py``'s (loaded from the
+force reaches a target, the case where the tongue contact's barrier must predict the teeth's push; and how
+deep a blade presses the lower incisors, read from its state. The lever is ``scripts/incisor_reach.py``'s (loaded from the
 script, so the tests step the law its results use)."""
 
 from __future__ import annotations
@@ -9,8 +9,7 @@ import importlib.util
 import math
 from pathlib import Path
 
-from softenv._ops import ScalarOps
-from softenv.devices.laryngoscope.physics import jaw_contact, jaw_force
+from softenv.devices.laryngoscope.physics import jaw_contact
 from softenv.devices.laryngoscope.single import Laryngoscope
 
 _spec = importlib.util.spec_from_file_location("incisor_reach", Path(__file__).resolve().parent.parent / "scripts"
@@ -30,12 +29,10 @@ def lever_actions(single: Laryngoscope, target: float, periods: int, held: int) 
     return actions
 
 
-def jaw_push(single: Laryngoscope) -> tuple[float, float]:
-    """The lower incisal edge's depth into the blade's underside (m; positive: pressing) and the jaw's
-    force on the blade (N) at the end of the last control period (0 without lower incisors)."""
+def jaw_depth(single: Laryngoscope) -> float:
+    """The lower incisal edge's depth into the blade's underside (m; positive: pressing) at the end of the
+    last control period (-inf without lower incisors)."""
     if single.c.jaw is None:
-        return -math.inf, 0.0
-    x, y, a, vx, vy, w = single.kinematics()[:6]
-    blade = (x, y, a, math.cos(a), math.sin(a), vx, vy, w)
-    fx, fy, _ = jaw_force(blade, single.c, ScalarOps)
-    return jaw_contact(*blade[:2], *blade[3:5], single.c)[0], math.hypot(fx, fy)
+        return -math.inf
+    x, y, a = single.kinematics()[:3]
+    return jaw_contact(x, y, math.cos(a), math.sin(a), single.c)[0]

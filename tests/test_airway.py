@@ -18,7 +18,7 @@ from softenv.training.scoring import ADVICE, AIRWAY_ADVICE, replay_hand, score_f
 from softenv.training.logs import HAND_LOG, read_log, read_scene, save_log
 from softenv.training.trainee import degrade, expert_hand_log
 
-from lever_support import incisor_reach, jaw_push
+from lever_support import incisor_reach, jaw_depth
 
 KEYED = ("tissue", "mesh", "shape_model", "response", "device", "dynamics", "task")
 
@@ -114,7 +114,7 @@ def test_the_interincisal_gap_is_the_edges_distance_with_the_blade_between(mouth
     segment = device._space.incisors[0]
     upper_edge = segment.a.y - segment.radius
     assert upper_edge - (device.c.jaw[1] + device.c.jaw_radius) == pytest.approx(gap * 1e-3, abs=1e-12)
-    depth = jaw_push(device)[0]
+    depth = jaw_depth(device)
     assert depth == pytest.approx((mouth_opening + 22.0 - gap) * 1e-3, abs=1e-9)
     assert gym.make("SoftSphereAirway-v0").unwrapped.device.laryngoscope.c.jaw is None
     with pytest.raises(ValueError, match=r"airway\.interincisal_gap = 30 mm .*allowed >= .* = 32 mm"):
@@ -159,6 +159,18 @@ def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():
     assert not lever["at_neck_limit"] and lever["held_N"] == pytest.approx(force, rel=0.01)
     assert lever["incisor_N"] > 10.0
     assert abs(lever["insertion_deg"] - deepest["insertion_deg"]) < 1.0
+
+
+def test_lower_incisors_stop_the_lift_short_and_the_lever_on_the_teeth_reaches_past_them():
+    """What lower incisors would make of grade 3 (scripts/incisor_reach.py's jaw table, docs/airways.md):
+    30 mm between the incisal edges, the expert's lift stalls on the jaw with the tongue short of the centre's
+    force, the jaw carrying the rest; turned about the upper incisal edge, the blade holds that force and
+    loads the teeth with tens of newtons. 40 mm apart, the lift reaches the centre as without them."""
+    force = incisor_reach.centre(3)[1]
+    stalled, lever = incisor_reach.lift(3, incisor_reach.centre(3)[0], 30.0), incisor_reach.lever(3, 30.0)
+    assert not stalled["reached"] and stalled["tongue_N"] < 0.9 * force and stalled["peak_jaw_N"] > 10.0
+    assert not lever["at_neck_limit"] and lever["held_N"] == pytest.approx(force, rel=0.01) and lever["incisor_N"] > 10.0
+    assert incisor_reach.lift(3, incisor_reach.centre(3)[0], 40.0)["reached"]
 
 
 def test_a_lever_loads_the_teeth_sooner_through_a_restricted_mouth_opening():

@@ -21,7 +21,7 @@ from softenv.envs.world import World
 from softenv.haptics import HapticLoop
 from softenv.tissue import AnalyticTissue
 
-from lever_support import jaw_push
+from lever_support import jaw_depth
 
 PRESS, HOLD = [0.0, 0.9, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]
 JAW = {"airway": {"interincisal_gap": 26.0}}      # lower incisors 1 mm under the blade in the start pose
@@ -180,15 +180,15 @@ def test_a_blade_pressed_onto_the_lower_incisors_rests_on_the_jaw():
     for period in range(108):
         for d in (dev, free):
             d.control_step(PRESS if period < 8 else HOLD)
-    depth, push = jaw_push(dev)
+    depth, push = jaw_depth(dev), dev.jaw_force
     pull = np.linalg.norm(coupling_pull(dev))
-    assert free.normal_force > 15.0 and jaw_push(free) == (-math.inf, 0.0)
+    assert free.normal_force > 15.0 and jaw_depth(free) == -math.inf and free.jaw_force == 0.0
     assert dev.normal_force == 0.0 and dev.incisor_force == 0.0 and push > 15.0
     assert push == pytest.approx(pull, rel=0.01)
     assert depth == pytest.approx(pull / JAW_STIFFNESS, rel=0.01)
     for _ in range(30):
         dev.control_step([0.0, -1.0, 0.0, -1.0])
-    assert jaw_push(dev)[1] == 0.0 and dev.incisor_force > 1.0
+    assert dev.jaw_force == 0.0 and dev.incisor_force > 1.0
 
 
 EXTREMES = {
@@ -213,7 +213,7 @@ def test_full_speed_into_teeth_or_tongue_stays_finite_and_never_tunnels(name, ac
         # the blade never passes the tongue's saturation barrier (80 % of the radius)
         assert dev.penetration() < 0.83 * dev.c.R
         # nor sinks onto the lower incisors by half the flange's height
-        assert jaw_push(dev)[0] < 0.5 * dev.params.flange_height
+        assert jaw_depth(dev) < 0.5 * dev.params.flange_height
 
 
 @pytest.mark.parametrize("name", list(EXTREMES))
@@ -326,11 +326,12 @@ def test_one_device_on_floats_equals_the_batch_on_arrays_bit_for_bit(sections: d
     for a in actions:
         single.control_step(a.tolist())
         batch.control_step(a[None])
-        jawed += jaw_push(single)[1] > 0
+        jawed += single.jaw_force > 0
         s, t = single.state(), batch.state()
         for field in ("blade", "hand", "lateral", "contact", "hand_velocity"):
             assert np.array_equal(getattr(s, field), getattr(t, field)), field     # (zero's sign may differ)
         assert single.observation() == batch.observation()[0].tolist()
+        assert single.jaw_force == batch.jaw_force[0]
         touched += single.normal_force > 0
         incisors += single.incisor_force > 0
     assert touched > periods // 4 and incisors >= on_incisors

@@ -26,7 +26,7 @@ from softenv.envs.config import scene_config
 from softenv.envs.world import World
 from softenv.training.hand import haptic_config
 
-from lever_support import jaw_push, lever_actions
+from lever_support import lever_actions
 
 torch = pytest.importorskip("torch")
 
@@ -76,7 +76,7 @@ def test_every_device_of_the_warp_engine_equals_a_single_pymunk_device_bit_for_b
     for a in actions:
         for single, row in zip(singles, a):
             single.control_step(row.tolist())
-            jawed += jaw_push(single)[1] > 0
+            jawed += single.jaw_force > 0
             single._blade.each_arbiter(lambda arbiter: deep.extend(q.distance <= -INCISOR_RADIUS for q in
                                                                    arbiter.contact_point_set.points))
         batch.control_step(batch._array(a))

@@ -22,6 +22,7 @@ from . import ANGLE_SCALE, LATERAL_SCALE, LATERAL_SPEED_SCALE, POSITION_SCALE, S
 from .params import INCISOR_RADIUS, SHAPE_FRICTION, SPRING_LENGTH, LaryngoscopeParams
 from .physics import (contact_features, coupling_force, grip_offset, hand_command, jaw_contact, nearest_point, squash,
                       substep_constants)
+from .physics import jaw_force as jaw_push      # the push (fx, fy, torque); jaw_force below is its size
 
 COLLISION_SLOP = 1e-4         # m (pymunk's default 0.1 assumes pixels)
 SOLVER_ITERATIONS = 3         # pymunk's contact solver (default 10): one contact a blade, warm-started over 20+ substeps
@@ -266,6 +267,16 @@ class LaryngoscopeBase:
     def incisor_force(self) -> Any:
         """The incisors' force (N), the mean over the last control period."""
         return self._own(self._incisor)
+
+    @property
+    def jaw_force(self) -> Any:
+        """The jaw's push on the blade (N) in the current state (:func:`~.physics.jaw_force`): 0 without
+        lower incisors or clear of them."""
+        x, y, a, vx, vy, w = self.kinematics()[:6]
+        if self.c.jaw is None:
+            return self._own(0.0 * x)
+        fx, fy, _ = jaw_push((x, y, a, self.ops.cos(a), self.ops.sin(a), vx, vy, w), self.c, self.ops)
+        return self.ops.sqrt(fx * fx + fy * fy)
 
     def hand_velocity(self) -> np.ndarray:
         """``(n, 4)``: the hand's last velocities x, z (m/s), pitch rate (rad/s), lateral (m/s)."""
