@@ -227,6 +227,11 @@ def test_rgb_array_shows_the_blade_beside_the_sphere_and_human_mode_draws_headle
     second = env.render()
     assert np.abs(second[:, 96:].astype(int) - first[:, 96:].astype(int)).sum() > 1000   # the side view moved
     env.close()
+    jawed = gym.make("SoftSphereHaptic-v0", render_mode="rgb_array", render={"size": 96}, airway={"interincisal_gap": 30.0})
+    jawed.reset(seed=0)
+    lower = jawed.render()                                 # the same start, with lower incisors drawn under the blade
+    assert np.array_equal(lower[:, :96], first[:, :96]) and np.abs(lower[:, 96:].astype(int) - first[:, 96:]).sum() > 1000
+    jawed.close()
     human = gym.make("SoftSphereHaptic-v0", render_mode="human")
     human.reset(seed=0)
     human.step(PRESS)

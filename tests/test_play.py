@@ -11,7 +11,7 @@ from softenv.training import play
 from softenv.training.inputs import CONTROLS, DEAD_ZONE, FINE, RAMP_FLOOR, RAMP_S, PygameInput
 from softenv.training.logs import SENSOR_COLUMNS, read_log, read_readings
 from softenv.training.scoring import score_file
-from softenv.training.play_view import DANGER, HAND, INK, PANEL, SCALE_BAR_MM, SOLID, TARGET
+from softenv.training.play_view import DANGER, HAND, INK, PANEL, SCALE_BAR_MM, SOLID, TARGET, TOOTH
 
 DT = 0.02
 MAX_HAND_SPEED = 0.2          # SoftSphereHaptic-v0's device: m/s at full action
@@ -209,6 +209,19 @@ def test_the_tongue_gauge_turns_red_past_the_safe_force_and_the_teeth_are_flagge
     touched = [d for d in seen.drawn if "incisor contact" in d]
     assert touched, "the incisors were never flagged"
     assert not any("incisor contact" in d for d in seen.drawn[:10])        # not before the blade reaches them
+
+
+def test_the_side_view_draws_lower_incisors_where_the_airway_has_them(tmp_path):
+    """An airway with an interincisal gap shows the lower incisors under the blade, in the teeth's colour; one
+    without shows none."""
+    play.headless()
+    for scene, lower in (({"airway": {"interincisal_gap": 30.0}}, True), ({}, False)):
+        seen = Recorder(keep=(3,))
+        play.run(seconds=0.1, out_dir=tmp_path / str(lower), realtime=False, echo=lambda s: None, screens=False,
+                 on_frame=seen, scene=scene)
+        assert ("lower incisors" in seen.drawn[3]) == lower
+        if lower:
+            assert _has_colour(seen.frames[3], seen.drawn[3]["lower incisors"], TOOTH)
 
 
 def _only_text(image, rect, colour, tol=6.0):
