@@ -140,14 +140,10 @@ def lift_reach(grade: int, step_deg: float, limit_deg: float = 130.0) -> dict[st
     return {"deepest": deepest, "first_failed": first_failed}
 
 
-def least_gap(grade: int) -> float:
-    """The smallest interincisal gap (mm) the blade fits in on ``grade``: its mouth opening plus the flange."""
-    return airway(haptic_config(scene(grade))["airway"]).mouth_opening + LaryngoscopeParams.flange_height * 1e3
-
-
 def jaw_row(grade: int, gap: float) -> dict[str, Any]:
     """Lifting and levering toward ``grade``'s centre with lower incisors ``gap`` mm under the upper."""
-    return {"gap_mm": gap, "clearance_mm": gap - least_gap(grade), "lift": lift(grade, centre(grade)[0], gap),
+    clearance = LaryngoscopeParams.from_config(haptic_config(scene(grade, gap))).lower_clearance   # refuses a gap too small
+    return {"gap_mm": gap, "clearance_mm": clearance * 1e3, "lift": lift(grade, centre(grade)[0], gap),
             "lever": lever(grade, gap)}
 
 
@@ -167,7 +163,7 @@ def main() -> None:
                      "insertion_range_deg": list(target_ranges(config["task"], config["airway"])["target_insertion_deg"]),
                      "centre_insertion_deg": insertion, "centre_force_N": force,
                      "lift": lift_reach(grade, args.step_deg), "lever": lever(grade),
-                     "jaw": [jaw_row(grade, gap) for gap in args.gaps if gap >= least_gap(grade)]})
+                     "jaw": [jaw_row(grade, gap) for gap in args.gaps]})
         print(f"grade {grade} done", flush=True)
     made = {"command": shlex.join(["python", *sys.argv]), "commit": code_revision(), "step_deg": args.step_deg,
             "gaps_mm": args.gaps}
