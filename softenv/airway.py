@@ -12,7 +12,7 @@ each ``None`` to take the grade's value (:data:`GRADES`) or a number of its own:
 | ``tongue_stiffness`` | | multiplies the tongue's Young's modulus, and the target family's forces with it, so the
   targets are the normal tongue's shapes, each needing that much more force |
 | ``interincisal_gap`` | mm | the upper and lower incisal edges' distance in the start pose, the blade's flange and
-  ``mouth_opening`` between them; the grade's ``None``: no lower teeth (a jaw that never closes on the blade) |
+  ``mouth_opening`` between them; ``None`` (grades 1 and 2): no lower teeth (a jaw that never closes on the blade) |
 
 Grade 1 is the airway of every laryngoscope scene before grades existed (SoftSphereHaptic-v0's), so
 a scene whose airway section is left at its defaults is keyed, cached and scored as before. The
@@ -30,11 +30,10 @@ from typing import Any
 GRADES: dict[int, tuple[str, float, float, float, float, float, float | None]] = {
     1: ("normal", 3.0, 0.5, 0.0, 1.0, 1.0, None),
     2: ("restricted neck extension", 2.0, 0.4, 2.0, 1.1, 1.0, None),
-    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0, None),
-    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15, None),
+    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0, 34.0),
+    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15, 32.0),
 }
 SETTINGS = ("mouth_opening", "neck_extension", "larynx_depth", "larynx_lift", "tongue_stiffness", "interincisal_gap")
-OPTIONAL_SETTINGS = ("interincisal_gap",)    # None resolved: that part of the anatomy is absent
 
 
 @dataclass(frozen=True)
@@ -59,7 +58,7 @@ class Airway:
         return tuple(getattr(self, k) for k in SETTINGS)
 
     def keyed(self) -> dict[str, float]:
-        """The settings by name, an absent part (:data:`OPTIONAL_SETTINGS` at ``None``) left out: how keys,
+        """The settings by name, an absent part (a setting at ``None``: no lower teeth) left out: how keys,
         logs and reports name the airway, the same as before that part existed."""
         return {k: v for k, v in zip(SETTINGS, self.settings) if v is not None}
 

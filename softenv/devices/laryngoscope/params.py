@@ -64,7 +64,7 @@ INCISOR_SETBACK = 0.03        # m from the heel toward the tip
 INCISOR_CROWN = (-0.008, 0.03)  # m: the tooth and the maxilla above it, up and back from the incisal edge
 LOWER_CROWN = (-0.008, -0.03)   # m: the lower tooth and the mandible, down and back from its incisal edge (drawn)
 # N/m: a jaw held by its muscles and joint yields 5 mm under 50 N (a stated choice); stiffer costs substeps
-# (omega_max: 37 a period at 1e4 N/m against 20 without the jaw, 71 at 5e4)
+# (omega_max: 34 a period at 1e4 N/m against 20 without the jaw)
 JAW_STIFFNESS = 1e4
 ACCURACY = 0.3                # omega_max h
 # hand workspace around the start grip (m, m, rad)

@@ -108,8 +108,9 @@ def nearest_point(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants, ops: P
 
 def jaw_contact(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants) -> tuple[Any, Any, Any, Any]:
     """Where the underside meets the lower incisal edge (``c.jaw`` must be set): the edge's depth into
-    the underside (along its normal; positive: pressing), the point over the edge's centre as a fraction
-    ``t`` of heel to tip, and that point relative to the blade's centre ``(rx, ry)``."""
+    the underside (along its normal; positive: pressing), whether it presses (the depth positive and the
+    point over the edge's centre between heel and tip), and that point relative to the blade's centre
+    ``(rx, ry)``."""
     hx, hy = c.heel
     tx, ty = c.tip
     jx, jy = cast(tuple[float, float], c.jaw)
@@ -119,7 +120,7 @@ def jaw_contact(px: Any, py: Any, cos_a: Any, sin_a: Any, c: Constants) -> tuple
     dy = (py + sin_a * tx + cos_a * ty) - ey
     t = ((jx - ex) * dx + (jy - ey) * dy) / (dx * dx + dy * dy)
     depth = c.jaw_radius - ((ex - jx) * -sin_a + (ey - jy) * cos_a)
-    return depth, t, (ex + t * dx) - px, (ey + t * dy) - py
+    return depth, (depth > 0.0) & (t >= 0.0) & (t <= 1.0), (ex + t * dx) - px, (ey + t * dy) - py
 
 
 def jaw_force(blade: tuple, c: Constants, ops: PhysicsOps) -> tuple[Any, Any, Any]:
@@ -131,10 +132,9 @@ def jaw_force(blade: tuple, c: Constants, ops: PhysicsOps) -> tuple[Any, Any, An
     :meth:`~.params.LaryngoscopeParams.omega_max` counts it. Every engine writes the same operations (the
     Warp and Triton kernels, the single device on floats with ``ScalarOps``)."""
     px, py, a, cos_a, sin_a, vx, vy, w = blade
-    depth, t, rx, ry = jaw_contact(px, py, cos_a, sin_a, c)
+    depth, pressed, rx, ry = jaw_contact(px, py, cos_a, sin_a, c)
     ux, uy = -sin_a, cos_a                                     # the underside's normal, into the blade
     approach = -((vx - w * ry) * ux + (vy + w * rx) * uy)     # speed of that point into the jaw
-    pressed = (depth > 0.0) & (t >= 0.0) & (t <= 1.0)
     F = ops.positive(c.k_jaw * depth + c.c_jaw * approach) * pressed
     fx = F * ux
     fy = F * uy

@@ -172,8 +172,8 @@ class LaryngoscopeBase:
                           * (ly - anchor) ** 2, 0.0)
         if self.c.jaw is None:
             return kinetic + coupling + tongue
-        jaw_depth, t = jaw_contact(x, y, np.cos(a), np.sin(a), self.c)[:2]
-        jaw = np.where((jaw_depth > 0) & (t >= 0) & (t <= 1), 0.5 * self.c.k_jaw * jaw_depth ** 2, 0.0)
+        jaw_depth, pressed = jaw_contact(x, y, np.cos(a), np.sin(a), self.c)[:2]
+        jaw = np.where(pressed, 0.5 * self.c.k_jaw * jaw_depth ** 2, 0.0)
         return kinetic + coupling + tongue + jaw
 
     def clinical_values(self) -> tuple[Any, ...]:
