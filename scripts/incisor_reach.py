@@ -1,5 +1,6 @@
-"""Why the scripted expert never loads the teeth: how deep a view lifting reaches on each airway grade, and
-where levering on the upper incisors would take the blade; and how lower incisors change that.
+"""Why the scripted expert never loads the upper teeth: how deep a view lifting reaches on each airway grade
+(each with its own lower incisors, where it has them), and where levering on the upper incisors would take the
+blade; and how lower incisors at other gaps change that.
 
     python scripts/incisor_reach.py --out results [--step-deg 0.5] [--gaps 40 34 32 30 28 26]
 
@@ -7,7 +8,7 @@ For each grade of SoftSphereAirway-v0, at its family's centre force ``P*`` (soft
 
 * **lifting**: the scripted expert's controller (HandController: insert, lift along the handle, sweep)
   toward the centre target with its insertion angle stepped deeper by ``--step-deg`` from the centre's; the
-  deepest it reaches (the env's success at the end of the episode) with the teeth untouched, and what
+  jaw's peak force at the centre, the deepest it reaches (the env's success at the end of the episode) with the teeth untouched, and what
   stops it one step further;
 * **levering**: the same start until the blade rests on the tongue, then the hand turned about the incisal
   edge (:func:`lever_action`) until the tongue's normal force is ``P*``, and held; the blade's insertion
@@ -126,18 +127,19 @@ def lever(grade: int, gap: float | None = None, held: int = 50) -> dict[str, Any
 
 
 def lift_reach(grade: int, step_deg: float, limit_deg: float = 130.0) -> dict[str, Any]:
-    """Lifting from the centre's insertion angle deeper by ``step_deg``: the deepest attempt reached with the
-    teeth untouched, and the first that was not (or ``None`` up to ``limit_deg``)."""
+    """Lifting from the centre's insertion angle deeper by ``step_deg``: the attempt at the centre, the deepest
+    reached with the teeth untouched, and the first that was not (or ``None`` up to ``limit_deg``)."""
     insertion = centre(grade)[0]
-    deepest, first_failed = None, None
+    at_centre, deepest, first_failed = None, None, None
     while insertion <= limit_deg:
         attempt = lift(grade, insertion)
+        at_centre = at_centre or attempt
         if not attempt["reached"] or attempt["peak_incisor_N"] > 0.0:
             first_failed = attempt
             break
         deepest = attempt
         insertion += step_deg
-    return {"deepest": deepest, "first_failed": first_failed}
+    return {"centre": at_centre, "deepest": deepest, "first_failed": first_failed}
 
 
 def jaw_row(grade: int, gap: float) -> dict[str, Any]:
@@ -160,6 +162,7 @@ def main() -> None:
         insertion, force = centre(grade)
         rows.append({"grade": grade, "name": GRADES[grade][0],
                      "mouth_opening_mm": airway(config["airway"]).mouth_opening,
+                     "interincisal_gap_mm": airway(config["airway"]).interincisal_gap,
                      "insertion_range_deg": list(target_ranges(config["task"], config["airway"])["target_insertion_deg"]),
                      "centre_insertion_deg": insertion, "centre_force_N": force,
                      "lift": lift_reach(grade, args.step_deg), "lever": lever(grade),
@@ -181,17 +184,21 @@ def report(rows: list[dict[str, Any]], made: dict[str, Any]) -> str:
              f"control periods an attempt; the deepest reached (the env's success) with the teeth untouched, and "
              f"what stopped the next. Levering: the expert's insertion until the blade rests on the tongue, then the "
              f"hand turned about the incisal edge ({LEVER_GAIN} rad/s per newton of normal-force error) and held; "
-             f"the blade's insertion angle there (90 deg + its pitch) and the teeth's force.", "",
-             "| grade | mouth opening (mm) | family insertion (deg) | centre force (N) | lifting reaches, teeth "
-             "untouched (deg) | one step deeper | lever: insertion (deg) | lever: teeth (N) | lever: force held (N) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"the blade's insertion angle there (90 deg + its pitch) and the teeth's force. Each grade with its own "
+             f"lower incisors, where it has them (`airway.interincisal_gap`).", "",
+             "| grade | mouth opening (mm) | interincisal gap (mm) | family insertion (deg) | centre force (N) | "
+             "lifting at the centre: jaw peak (N) | lifting reaches, teeth untouched (deg) | one step deeper | "
+             "lever: insertion (deg) | lever: teeth (N) | lever: force held (N) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         deepest, failed, lev = r["lift"]["deepest"], r["lift"]["first_failed"], r["lever"]
         why = ("-" if failed is None else "not reached" if not failed["reached"]
                else f"teeth touched ({failed['peak_incisor_N']:.2g} N)")
         force = f"{lev['held_N']:.1f}" + (" (neck limit)" if lev["at_neck_limit"] else "")
         lo, hi = r["insertion_range_deg"]
-        lines.append(f"| {r['grade']} | {r['mouth_opening_mm']:g} | {lo:g}-{hi:g} | {r['centre_force_N']:.1f} | "
+        gap = "none" if r["interincisal_gap_mm"] is None else f"{r['interincisal_gap_mm']:g}"
+        lines.append(f"| {r['grade']} | {r['mouth_opening_mm']:g} | {gap} | {lo:g}-{hi:g} | {r['centre_force_N']:.1f} | "
+                     f"{r['lift']['centre']['peak_jaw_N']:.1f} | "
                      f"{'-' if deepest is None else format(deepest['insertion_deg'], '.1f')} | {why} | "
                      f"{lev['insertion_deg']:.1f} | {lev['incisor_N']:.1f} | {force} |")
     held = [r for r in rows if not r["lever"]["at_neck_limit"] and r["lift"]["deepest"] is not None]
@@ -207,8 +214,14 @@ def report(rows: list[dict[str, Any]], made: dict[str, Any]) -> str:
                  f"lies {min(deeper):+.1f} to {max(deeper):+.1f} deg from the lift's deepest" if held else "")
               + (f"; on grade {', '.join(map(str, stopped))} the neck's limit stops the turn short of the force"
                  if stopped else "")
-              + ". No grade has lower incisors, so nothing bounds the lift from below: on the grades an expert who "
-              "lifts has no reason to load the teeth.", "",
+              + ". The view fixes the blade's pitch (the underside's point nearest the tongue's centre lies at 90 deg "
+              "plus the pitch), and at a given pitch pressing into the tongue moves the flange away from the upper "
+              "incisors: no press that reaches a view short of the lift's deepest loads them, so an expert who lifts "
+              "has no reason to. The lower incisors of the restricted mouth openings"
+              + "".join(f" (grade {r['grade']}: {r['lift']['centre']['peak_jaw_N']:.1f} N at the centre)"
+                        for r in rows if r["interincisal_gap_mm"] is not None)
+              + " take part of the lift's push where the view is shallow, and are left behind as the blade pitches "
+              "tip-down for deeper views.", "",
               "## With lower incisors", "",
               f"The same two attempts toward each grade's centre with `airway.interincisal_gap` set (lower incisors "
               f"that gap under the upper ones; the clearance is the gap less the mouth opening and the flange's "

@@ -74,7 +74,8 @@ def members(grade: int, n: int, seed: int) -> list[dict[str, Any]]:
             parts, trainee, _ = score_hand_log(degrade(log, config, seed=tremor_seed, **amounts), config, group, expert)
             rows.append({"grade": grade, "group": group, **{k: parts[k] for k in (*PARTS, "score")},
                          "peak_tongue_N": trainee.clinical["peak_tongue_force_N"],
-                         "peak_incisor_N": trainee.clinical["peak_incisor_force_N"]})
+                         "peak_incisor_N": trainee.clinical["peak_incisor_force_N"],
+                         "peak_jaw_N": trainee.clinical["peak_jaw_force_N"]})
     return rows
 
 
@@ -129,6 +130,7 @@ def analyse(known: pd.DataFrame, sessions: pd.DataFrame, seed: int) -> dict[str,
         out["difficulty"][grade] = {
             **{f"{g}_peak_tongue_N": float(rows[rows.group == g]["peak_tongue_N"].mean()) for g in GROUPS},
             **{f"{g}_peak_incisor_N": float(rows[rows.group == g]["peak_incisor_N"].mean()) for g in GROUPS},
+            **{f"{g}_peak_jaw_N": float(rows[rows.group == g]["peak_jaw_N"].mean()) for g in GROUPS},
             "population_peak_incisor_N": float(pop["peak_incisor_N"].mean()),
             "population_teeth_touched": float(np.mean(pop["peak_incisor_N"] > 0.0)),
             "population_score": float(pop["score"].mean())}
@@ -202,6 +204,7 @@ def figure(known: pd.DataFrame, sessions: pd.DataFrame, result: dict[str, Any], 
     forces.plot(grades, [d[k]["novice_peak_tongue_N"] for k in grades], "s-", label="novice group: peak tongue force")
     forces.plot(grades, [d[k]["population_peak_incisor_N"] for k in grades], "^-",
                 label="graded-skill population: peak incisor force")
+    forces.plot(grades, [d[k]["expert_peak_jaw_N"] for k in grades], "v-", label="expert group: peak jaw force")
     forces.set_xticks(grades)
     forces.set_xlabel("airway grade")
     forces.set_ylabel("force (N)")
@@ -221,7 +224,7 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
     corr = np.array(result["internal"]["spearman"])
     rt = result["retest"]
     rise = {k: d[last][f"{k}"] - d[first][f"{k}"] for k in ("expert_peak_tongue_N", "novice_peak_tongue_N",
-                                                             "population_peak_incisor_N")}
+                                                             "population_peak_incisor_N", "expert_peak_jaw_N")}
     davis = lambda kind, who: DAVIS_2023[kind][who][0] * LBF  # noqa: E731
     lines = [
         "# The trainee score's validity argument across airway grades\n",
@@ -267,11 +270,11 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         "## 4. Relations to difficulty\n",
         "Means over each group's members (first sessions for the population). Peak forces in N.\n",
         "| grade | expert group: peak tongue | novice group: peak tongue (over the expert group's) | expert group: "
-        "peak incisor | population: peak incisor | population: teeth touched | population: score | expert group: "
-        "score |", "|---|---|---|---|---|---|---|---|",
+        "peak incisor | expert group: peak jaw (lower incisors) | population: peak incisor | population: teeth "
+        "touched | population: score | expert group: score |", "|---|---|---|---|---|---|---|---|---|",
         *[f"| {k} | {d[k]['expert_peak_tongue_N']:.1f} | {d[k]['novice_peak_tongue_N']:.1f} "
           f"({d[k]['novice_peak_tongue_N'] / d[k]['expert_peak_tongue_N']:.2f}) | "
-          f"{d[k]['expert_peak_incisor_N']:.1f} | {d[k]['population_peak_incisor_N']:.1f} | "
+          f"{d[k]['expert_peak_incisor_N']:.1f} | {d[k]['expert_peak_jaw_N']:.1f} | {d[k]['population_peak_incisor_N']:.1f} | "
           f"{d[k]['population_teeth_touched']:.0%} | {d[k]['population_score']:.1f} | {kg[k]['expert'][0]:.1f} |"
           for k in grades], "",
         f"Spearman's rho between grade and the population's score: {result['spearman_grade']['population_score']:.2f}; "
@@ -285,10 +288,10 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         f"novice group +{rise['novice_peak_tongue_N']:.1f} N (the whole lift, not a tongue-base gauge) | "
         f"{'rises, as published' if rise['expert_peak_tongue_N'] > 0 else '**does not rise**'} |",
         f"| incisor force | +{davis('incisor', 'students'):.1f}, +{davis('incisor', 'residents'):.1f}, "
-        f"+{davis('incisor', 'staff'):.1f} N (6.95, 5.93, 5.94 lbf) | expert group +"
-        f"{d[last]['expert_peak_incisor_N'] - d[first]['expert_peak_incisor_N']:.1f} N; graded-skill population "
-        f"+{rise['population_peak_incisor_N']:.1f} N | "
-        f"{'rises for the population (its levering trainees), not for the profiles, which do not lever' if rise['population_peak_incisor_N'] > 0 else '**does not rise**'} |",
+        f"+{davis('incisor', 'staff'):.1f} N (6.95, 5.93, 5.94 lbf) | expert group: upper incisors +"
+        f"{d[last]['expert_peak_incisor_N'] - d[first]['expert_peak_incisor_N']:.1f} N, lower incisors (the jaw) "
+        f"+{rise['expert_peak_jaw_N']:.1f} N; graded-skill population: upper +{rise['population_peak_incisor_N']:.1f} N | "
+        f"{'rises on the lower incisors for every group, on the upper only for the trainees who lever' if rise['expert_peak_jaw_N'] > 0 and rise['population_peak_incisor_N'] > 0 else '**does not rise**'} |",
         "",
         f"From grade {first} to grade {last} the mean score "
         + "; ".join(f"of the {g} group goes {kg[first][g][0]:.1f} -> {kg[last][g][0]:.1f} "
@@ -323,9 +326,12 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         "- **The spread within a group is a stated choice** (amounts times 0.5-1.5; day-to-day factors "
         f"{DAY_TO_DAY[0]:g}-{DAY_TO_DAY[1]:g}): effect sizes, ICC and false-pass rates scale with it. Real test-retest needs "
         "the same people on two days.\n",
-        "- **The expert never levers.** The scripted expert lifts along the handle, so its incisor force is 0 on "
-        "every grade; Davis et al. found staff loading the teeth 26 N more at the most restricted setting. Here "
-        "that rise appears only in trainees who lever, whose teeth part falls.\n",
+        "- **The expert never loads the upper incisors.** Davis et al. found staff loading the incisors 26 N more "
+        "at the most restricted setting. Here the expert's lift presses the lower incisors on the restricted mouth "
+        "openings (the expert group's peak jaw force above), but its upper-incisor force is 0 on every grade: the "
+        "view fixes the blade's pitch, and at the family's centre no press that reaches the view brings the flange up "
+        "into the upper teeth (docs/airways.md). The rise on the upper teeth appears only in trainees who lever, "
+        "whose teeth part falls; the score's teeth part reads the upper incisors only.\n",
         "- **Relations to other variables** beyond difficulty (global rating scales, checklists, success and "
         "time on patients) need real trainees scored both ways.\n",
         "- **Consequences** here are rates among synthetic groups; the real ones (who is held back, who is "

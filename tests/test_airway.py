@@ -41,10 +41,11 @@ def test_the_normal_airway_is_keyed_as_before_airways_existed_and_another_is_not
     assert "airway" in graded and graded != config_key(make_config(device=AIRWAY_DEVICE), KEYED)
     assert config_key(make_config(airway={"grade": 2}, device=AIRWAY_DEVICE), ("render",)) == \
         config_key(make_config(), ("render",))                         # not keyed where it bears on nothing
-    # no grade has lower teeth: keyed by the five settings there were before, and a gap given is keyed
+    # grades without lower teeth are keyed by the five settings there were before; a gap (given, or the grade's) is keyed
     assert "interincisal_gap" not in graded
     gapped = config_key(make_config(airway={"grade": 2, "interincisal_gap": 30.0}, device=AIRWAY_DEVICE), KEYED)
     assert "('interincisal_gap', 30.0)" in gapped and gapped != graded
+    assert f"('interincisal_gap', {GRADES[3][6]})" in config_key(make_config(airway={"grade": 3}, device=AIRWAY_DEVICE), KEYED)
 
 
 @pytest.mark.parametrize("sections, match", [
@@ -130,18 +131,22 @@ def test_the_neck_extension_bounds_the_blades_pitch(grade):
     assert env.device.laryngoscope.hand_pose[2] == pytest.approx(GRADES[grade][2], abs=1e-12)
 
 
-def test_the_expert_succeeds_on_every_grade_with_its_tongue_force_rising_and_its_teeth_untouched():
+def test_the_expert_succeeds_on_every_grade_with_its_forces_rising_and_its_upper_teeth_untouched():
     """The published direction (Davis et al. 2023: tongue-base force rises from the normal to the most
     restricted setting, for every group). The scripted expert lifts along the handle, so it never loads the
-    teeth on any grade (its incisor force cannot rise: docs/airways.md says so)."""
-    peaks = []
+    upper teeth on any grade (docs/airways.md says why no technique can at the family's centre); on the
+    restricted mouth openings (grades 3 and 4) its lift presses the blade onto the lower incisors, so the
+    force on the teeth rises from none to over 10 N there."""
+    peaks, jaw = [], []
     for grade in GRADES:
         config = haptic_config(airway_scene(grade))
         r = replay_hand(expert_hand_log(config), config)
         assert r.time_to_target_s is not None and r.final_error_mm < 0.1 * r.rest_error_mm
         assert r.clinical["peak_incisor_force_N"] == 0.0
         peaks.append(r.clinical["peak_tongue_force_N"])
+        jaw.append(r.clinical["peak_jaw_force_N"])
     assert all(b > a + 2.0 for a, b in zip(peaks, peaks[1:])), peaks
+    assert jaw[0] == jaw[1] == 0.0 and min(jaw[2:]) > 10.0, jaw
 
 
 def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():
@@ -162,8 +167,8 @@ def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():
 
 
 def test_lower_incisors_stop_the_lift_short_and_the_lever_on_the_teeth_reaches_past_them():
-    """What lower incisors would make of grade 3 (scripts/incisor_reach.py's jaw table, docs/airways.md):
-    30 mm between the incisal edges, the expert's lift stalls on the jaw with the tongue short of the centre's
+    """What closer lower incisors would make of grade 3 (scripts/incisor_reach.py's jaw table, docs/airways.md):
+    30 mm between the incisal edges (grade 3's own are 34 mm apart), the expert's lift stalls on the jaw with the tongue short of the centre's
     force, the jaw carrying the rest; turned about the upper incisal edge, the blade holds that force and
     loads the teeth with tens of newtons. 40 mm apart, the lift reaches the centre as without them."""
     force = incisor_reach.centre(3)[1]

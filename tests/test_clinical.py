@@ -106,11 +106,13 @@ def test_episode_metrics_of_a_known_log():
     log[1:, 4] = [0.0, 0.0, 0.03, 0.03]                        # then 3 cm aside
     log[1:, 5] = [1.0, -1.0, 0.0, 0.0]                         # wrist moment
     log[1:, 6] = [2.0, 2.0, 2.0, 0.0]                          # lift moment
+    log[1:, 7] = [0.0, 4.0, 7.0, 6.0]                          # the jaw's push
     m = clinical.episode_metrics(log, dt, 50.0)
     assert m["duration_s"] == pytest.approx(0.08)
     assert m["peak_tongue_force_N"] == 3.0 and m["mean_tongue_force_N"] == pytest.approx(1.5)
     assert m["tongue_force_time_Ns"] == pytest.approx(6.0 * dt)
     assert m["peak_incisor_force_N"] == 5.0 and m["incisor_contact_s"] == pytest.approx(2 * dt)
+    assert m["peak_jaw_force_N"] == 7.0
     # the hand's moment about the incisal edge |wrist + lift| = 3, 1, 2, 0: of its 6 N m, 1 while on the teeth
     assert m["lever_share"] == pytest.approx(1.0 / 6.0)
     assert m["hand_path_m"] == pytest.approx(0.05)
@@ -187,10 +189,29 @@ def test_batched_twin_reports_what_single_envs_report(mode):
         assert ("clinical" in x) == ("clinical" in y) == (t == len(actions) - 1)
     assert set(x["clinical"]) == set(y["clinical"])
     assert np.array_equal(x["_clinical"], y["_clinical"])
-    for key in clinical.episode_metrics(np.zeros((2, 7)), 0.02, 0.0):
+    for key in clinical.episode_metrics(np.zeros((2, len(clinical.COLUMNS))), 0.02, 0.0):
         assert x["clinical"][key][0] == y["clinical"][key][0] or (
             math.isnan(x["clinical"][key][0]) and math.isnan(y["clinical"][key][0]))
         np.testing.assert_allclose(x["clinical"][key], y["clinical"][key], rtol=1e-6, atol=1e-9)
+
+
+def test_the_jaws_peak_is_recorded_alike_by_single_envs_and_the_batched_twin():
+    """Grade 3's lower incisors under a blade pressed straight down: the clinical record's jaw peak is the
+    device's own reading at its highest, and the twin's env 0 records what a single env does, bit for bit."""
+    kwargs = {"airway": {"grade": 3}, "task": {"horizon": 40}}
+    single = gym.make("softenv:SoftSphereAirway-v0", **kwargs)
+    native = gym.make_vec("softenv:SoftSphereAirway-v0", num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
+    single.reset(seed=3)
+    native.reset(seed=3)
+    press = np.array([0.0, 1.0, 0.0, 0.0], np.float32)
+    readings = []
+    for _ in range(40):
+        info = single.step(press)[4]
+        batch_info = native.step(np.stack([press, press]))[4]
+        readings.append(float(single.unwrapped.device.laryngoscope.jaw_force))
+    assert max(readings) > 10.0 and info["clinical"]["peak_jaw_force_N"] == max(readings)
+    assert batch_info["clinical"]["peak_jaw_force_N"][0] == info["clinical"]["peak_jaw_force_N"]
+    assert gym.make("softenv:SoftSphereAirway-v0").unwrapped.device.laryngoscope.c.jaw is None    # grade 1: none
 
 
 def test_lever_share_is_1_for_a_blade_turned_on_the_teeth_and_0_for_a_press_clear_of_them():

@@ -32,7 +32,7 @@ _RENDER = threading.Lock()      # the scene renderer draws through pyplot, which
 METRIC_LABELS = {
     "peak_tongue_force_N": "peak tongue force (N)", "mean_tongue_force_N": "mean tongue force (N)",
     "tongue_force_time_Ns": "tongue force-time (N s)", "peak_incisor_force_N": "peak incisor force (N)",
-    "incisor_contact_s": "incisor contact (s)", "lever_share": "lever share", "hand_path_m": "hand path (m)",
+    "incisor_contact_s": "incisor contact (s)", "peak_jaw_force_N": "peak jaw force (N)", "lever_share": "lever share", "hand_path_m": "hand path (m)",
     "sparc": "SPARC", "ldlj": "LDLJ", "glottic_view_pct": "glottic view (%)", "duration_s": "duration (s)",
     "final_error_mm": "final shape error (mm)", "time_to_target_s": "time to target (s)",
     "peak_force_N": "peak force (N)", "mean_force_N": "mean force (N)", "force_time_integral_Ns": "force-time (N s)",

@@ -406,6 +406,7 @@ def _markdown(report: dict[str, Any]) -> str:
         mc, ec = m["clinical"], e["clinical"]
         rows += [("peak incisor force", f"{mc['peak_incisor_force_N']:.2f} N", f"{ec['peak_incisor_force_N']:.2f} N"),
                  ("incisor contact", f"{mc['incisor_contact_s']:.2f} s", f"{ec['incisor_contact_s']:.2f} s"),
+                 ("peak jaw force (lower incisors)", f"{mc['peak_jaw_force_N']:.2f} N", f"{ec['peak_jaw_force_N']:.2f} N"),
                  ("lever share (moments about the incisors)", f"{mc['lever_share']:.2f}", f"{ec['lever_share']:.2f}"),
                  ("hand path", f"{mc['hand_path_m'] * 100:.1f} cm", f"{ec['hand_path_m'] * 100:.1f} cm"),
                  ("SPARC (hand speed)", f"{mc['sparc']:.2f}", f"{ec['sparc']:.2f}"),

@@ -131,15 +131,16 @@ def rest_view_analytic(radius: float = 1.0) -> float:
 
 
 COLUMNS = ("tongue_force_N", "incisor_force_N", "hand_x_m", "hand_z_m", "hand_y_m", "wrist_moment_Nm",
-           "lift_moment_Nm")
+           "lift_moment_Nm", "jaw_force_N")
 
 
 class ClinicalRecorder:
     """A log of ``n`` devices' episodes, one row per control step, and their clinical metrics.
 
     Each step writes per-device :data:`COLUMNS`: tongue and incisor force (N), the hand's position
-    (m), and the two parts of the hand's moment about the incisal edge (N m): the wrist's (the rotary
-    coupling) and that of the hand's force at the grip. Row 0 holds
+    (m), the two parts of the hand's moment about the incisal edge (N m): the wrist's (the rotary
+    coupling) and that of the hand's force at the grip, and the jaw's push (N; 0 without lower
+    incisors). Row 0 holds
     the start pose. :meth:`summary` computes everything from one device's rows, so one env and the
     batched twin's env ``i`` get the same numbers bit for bit.
     """
@@ -150,7 +151,7 @@ class ClinicalRecorder:
         self.steps = np.zeros(n, dtype=np.int64)
 
     def start(self, rows: Any, values: np.ndarray | tuple[float, ...]) -> None:
-        """Begin episodes of these devices with their rest values ``(len(rows), 7)`` (a single env's: a tuple)."""
+        """Begin episodes of these devices with their rest values ``(len(rows), 8)`` (a single env's: a tuple)."""
         self.steps[rows] = 0
         self.log[0, rows] = values
 
@@ -160,7 +161,7 @@ class ClinicalRecorder:
         self.log[t, 0] = values
 
     def record(self, rows: np.ndarray, values: np.ndarray) -> None:
-        """One step of the devices ``rows`` (indices): ``values`` ``(len(rows), 7)``."""
+        """One step of the devices ``rows`` (indices): ``values`` ``(len(rows), 8)``."""
         t = self.steps[rows] = np.minimum(self.steps[rows] + 1, len(self.log) - 1)
         self.log[t, rows] = values
 
@@ -170,7 +171,7 @@ class ClinicalRecorder:
 
 
 def episode_metrics(log: np.ndarray, dt: float, view_pct: float) -> dict[str, float]:
-    """Clinical metrics of one episode's log ``(steps + 1, 7)`` (row 0: the start; :data:`COLUMNS`)."""
+    """Clinical metrics of one episode's log ``(steps + 1, 8)`` (row 0: the start; :data:`COLUMNS`)."""
     steps = len(log) - 1
     duration = steps * dt
     rows = log[1:]
@@ -186,6 +187,7 @@ def episode_metrics(log: np.ndarray, dt: float, view_pct: float) -> dict[str, fl
             "tongue_force_time_Ns": float(np.sum(tongue) * dt),
             "peak_incisor_force_N": float(incisor.max(initial=0.0)),
             "incisor_contact_s": float(np.count_nonzero(incisor > 0.0) * dt),
+            "peak_jaw_force_N": float(rows[:, 7].max(initial=0.0)),
             "lever_share": float(np.sum(moment[incisor > 0.0])) / moments if moments > 0.0 else 0.0,
             "hand_path_m": float(np.sum(moves)),
             "sparc": sparc(speed, 1.0 / dt), "ldlj": ldlj(speed, 1.0 / dt),

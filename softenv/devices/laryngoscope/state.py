@@ -178,9 +178,9 @@ class LaryngoscopeBase:
 
     def clinical_values(self) -> tuple[Any, ...]:
         """Each device's values in :data:`softenv.devices.laryngoscope.clinical.COLUMNS` order: tongue and incisor force (N),
-        the hand's x, z and lateral y (m), and the moments (N m) about the incisal edge of the
+        the hand's x, z and lateral y (m), the moments (N m) about the incisal edge of the
         coupling's pull on the blade, split into the wrist's (rotary spring and damper: levering)
-        and that of the force at the grip (lifting)."""
+        and that of the force at the grip (lifting), and the jaw's push (N) now."""
         c = self.c
         x, y, a, vx, vy, w, gx, gy, pitch = self.kinematics()
         hand_lat = self._lateral_state()[2]
@@ -190,7 +190,8 @@ class LaryngoscopeBase:
         ix, iy = self.params.incisor_segment[0]
         qx, qy = grip_offset(ca, sa, c)
         lift = (x + qx - ix) * Fy - (y + qy - iy) * Fx
-        return self.tongue_force, self.incisor_force, gx, gy, hand_lat, wrist, lift
+        jaw = self.jaw_force if c.jaw is not None else self._own(0.0 * x)
+        return self.tongue_force, self.incisor_force, gx, gy, hand_lat, wrist, lift, jaw
 
     def start_state(self, n: int) -> DeviceState:
         p = self.params
