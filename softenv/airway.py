@@ -30,8 +30,8 @@ from typing import Any
 GRADES: dict[int, tuple[str, float, float, float, float, float, float | None]] = {
     1: ("normal", 3.0, 0.5, 0.0, 1.0, 1.0, None),
     2: ("restricted neck extension", 2.0, 0.4, 2.0, 1.1, 1.0, None),
-    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0, 34.0),
-    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15, 32.0),
+    3: ("restricted mouth opening", 1.0, 0.5, 2.0, 1.2, 1.0, 35.0),
+    4: ("restricted neck extension and mouth opening, stiff tongue", 0.0, 0.4, 4.0, 1.25, 1.15, 33.0),
 }
 SETTINGS = ("mouth_opening", "neck_extension", "larynx_depth", "larynx_lift", "tongue_stiffness", "interincisal_gap")
 

@@ -188,16 +188,17 @@ def test_two_stations_writing_at_once_both_land(url, tmp_path):
 def test_rescoring_keeps_the_old_scores_beside_the_new(url, monkeypatch):
     with Store(url) as store:
         first = store.add(example_log("device_logs/hesitant_tremulous"), "T-5")
-        monkeypatch.setattr(scoring, "SCORE_VERSION", 2)
+        monkeypatch.setattr(scoring, "SCORE_VERSION", scoring.SCORE_VERSION + 1)
         monkeypatch.setattr(scoring, "HAND_WEIGHTS", {**scoring.HAND_WEIGHTS, "speed": 0.5})
         progress = []
         assert store.rescore(lambda done, total: progress.append((done, total))) == 1 and progress == [(1, 1)]
-        assert store.rescore() == 0                                 # every session has a v2 score now
+        assert store.rescore() == 0                                 # every session has a score of the new version now
         now = store.session(first.id)
-        assert now.formula_version == 2 and now.score == pytest.approx(
+        old = first.formula_version
+        assert now.formula_version == old + 1 and now.score == pytest.approx(
             scoring.score_file(example_log("device_logs/hesitant_tremulous"))["score"])
         history = store.score_history(first.id)
-        assert [(v, s) for v, s, _ in history] == [(1, first.score), (2, now.score)] and now.score != first.score
+        assert [(v, s) for v, s, _ in history] == [(old, first.score), (old + 1, now.score)] and now.score != first.score
 
 
 def test_deleting_a_trainee_removes_their_sessions_logs_and_scores_from_the_file(tmp_path):

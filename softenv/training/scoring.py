@@ -19,7 +19,9 @@ carries its own.
 ``time_to_target``: first time the shape error falls under the scene's tolerance. ``INCISOR_LIMIT_N``
 = 10 N, a stated choice: levering on the upper incisors is an error in the technique taught (lift along
 the handle), though manikin studies measure peak incisor forces of 36-58 N in every group of experience
-(Bucx et al. 1995); 10 N or more costs the whole term.
+(Bucx et al. 1995); 10 N or more costs the whole term. On an airway with lower incisors the lift itself
+rests the blade on them, so the teeth term adds only their force beyond the airway's expert's: a hand
+that presses harder than the lift needs drives the blade into the jaw as well as the tongue.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ COLUMNS = FORCE_LOG.columns
 INCISOR_LIMIT_N = 10.0
 # the formulas' version: bump it when a weight, a term or the expert changes, so that stored scores
 # (softenv.skills) can be told apart and rescored from their raw logs
-SCORE_VERSION = 1
+SCORE_VERSION = 2            # 2: the teeth term counts the lower incisors' force beyond the expert's
 # the score's parts: weights and definitions (force-command logs; hand-pose logs)
 WEIGHTS = {"accuracy": 0.5, "speed": 0.2, "safety": 0.2, "smoothness": 0.1}
 HAND_WEIGHTS = {"accuracy": 0.3, "speed": 0.15, "safety": 0.15, "teeth": 0.15, "smoothness": 0.1, "view": 0.15}
@@ -57,7 +59,8 @@ _COMMON = {"accuracy": "clip(1 - final_error / rest_error, 0, 1)",
 TERMS = {**_COMMON, "safety": "clip(1 - max(peak_force - safe_force, 0) / safe_force, 0, 1)",
          "smoothness": "clip(expert_jerk / jerk, 0, 1)"}
 HAND_TERMS = {**_COMMON, "safety": "clip(1 - max(peak_tongue_force - safe_force, 0) / safe_force, 0, 1)",
-              "teeth": f"clip(1 - peak_incisor_force / {INCISOR_LIMIT_N:g} N, 0, 1)",
+              "teeth": f"clip(1 - (peak_incisor_force + max(peak_jaw_force - expert_peak_jaw_force, 0)) / "
+                       f"{INCISOR_LIMIT_N:g} N, 0, 1) (upper incisors; lower incisors beyond the airway's expert's)",
               "smoothness": "clip(expert_sparc / sparc, 0, 1) (SPARC of the hand's speed; 0 if undefined)",
               "view": "clip((view - rest_view) / (expert_view - rest_view), 0, 1) (glottic-view proxy, %)"}
 
@@ -90,6 +93,8 @@ ADVICE = {
 AIRWAY_ADVICE = {
     "teeth": "On this airway the upper teeth sit {mouth_opening:g} mm above the blade's flange at the start: the "
              "least levering reaches them.",
+    "lower teeth": "This airway's lower teeth lie {interincisal_gap:g} mm under the upper: press the blade onto them "
+                   "no harder than the lift needs (a harder press squeezes the jaw, not the tongue).",
     "safety": "This airway's target needs about {target_force:.0f} N: build the lift steadily and stop there.",
     "accuracy": "On this airway the view lies {larynx_depth:g} deg deeper: slide the blade further in before lifting.",
 }
@@ -109,10 +114,20 @@ def improvements(report: dict[str, Any], n: int = 2) -> list[str]:
     gain = report["points_to_gain"]
     worst = sorted((k for k in gain if gain[k] > 0.05), key=lambda k: -gain[k])[:n]
     patient = report.get("airway") or {}
-    graded = bool(patient) and not airway({"grade": 1, **patient["settings"]}).is_normal
-    return [ADVICE[k].format(safe_force=report["safe_force_N"])
-            + (" " + AIRWAY_ADVICE[k].format(**patient["settings"], target_force=patient["target_force_N"])
-               if graded and k in AIRWAY_ADVICE else "") for k in worst]
+    settings = patient.get("settings", {})
+    graded = bool(patient) and not airway({"grade": 1, **settings}).is_normal
+    words = {**settings, "safe_force": report["safe_force_N"], "target_force": patient.get("target_force_N", 0.0)}
+    return [" ".join(text.format(**words) for text in _advice(k, report, graded)) for k in worst]
+
+
+def _advice(part: str, report: dict[str, Any], graded: bool) -> list[str]:
+    """A part's advice, the airway's addition where ``graded``; the teeth's names the teeth that cost the points:
+    the upper ones (levered on) and the lower ones (pressed harder than the airway's expert did)."""
+    if part != "teeth":
+        return [ADVICE[part], *([AIRWAY_ADVICE[part]] if graded and part in AIRWAY_ADVICE else [])]
+    trainee, expert = report["metrics"]["clinical"], report["expert"]["clinical"]
+    upper = [ADVICE["teeth"], *([AIRWAY_ADVICE["teeth"]] if graded else [])] if trainee["peak_incisor_force_N"] > 0 else []
+    return upper + ([AIRWAY_ADVICE["lower teeth"]] if trainee["peak_jaw_force_N"] > expert["peak_jaw_force_N"] else [])
 
 
 @dataclass
@@ -277,7 +292,8 @@ def hand_score(trainee: Replay, expert: Replay, safe_force: float, rest_view: fl
     (%) of the untouched tongue."""
     parts = _common_parts(trainee, expert, safe_force)
     c, e = trainee.clinical, expert.clinical
-    parts["teeth"] = float(np.clip(1.0 - c["peak_incisor_force_N"] / INCISOR_LIMIT_N, 0.0, 1.0))
+    teeth = c["peak_incisor_force_N"] + max(c["peak_jaw_force_N"] - e["peak_jaw_force_N"], 0.0)
+    parts["teeth"] = float(np.clip(1.0 - teeth / INCISOR_LIMIT_N, 0.0, 1.0))
     parts["smoothness"] = 0.0 if not math.isfinite(c["sparc"]) else float(np.clip(e["sparc"] / c["sparc"], 0.0, 1.0))
     gain = e["glottic_view_pct"] - rest_view
     parts["view"] = float(np.clip((c["glottic_view_pct"] - rest_view) / gain, 0.0, 1.0)) if gain > 0 else 1.0
