@@ -148,7 +148,7 @@ def test_shipped_device_logs_rank_the_expert_first_and_each_error_costs_its_part
     assert reports["hesitant_tremulous"]["smoothness"] < 0.6 and reports["hesitant_tremulous"]["speed"] < 0.6
     assert reports["wrong_direction"]["accuracy"] < 0.7
     md = (tmp_path / "levers_on_teeth_score.md").read_text()
-    assert "teeth = clip(1 - peak_incisor_force" in md and "peak incisor force" in md
+    assert "teeth = clip(1 - (peak_incisor_force + max(peak_jaw_force" in md and "peak incisor force" in md
     assert (tmp_path / "levers_on_teeth_score.png").stat().st_size > 1000
     # what to improve first: each log's advice names its own error; the expert has nothing to improve
     assert expert["advice"] == [] and max(expert["points_to_gain"].values()) < 0.05
