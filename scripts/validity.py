@@ -304,7 +304,9 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         "harder than that expert: its floor (a level blade above the tongue's centre, "
         f"{-1e3 * hand_limits(haptic_config(airway_scene(last)))['hand_z_m'][0]:g} mm below the start) stops the "
         "novice's overshoot on every grade, and on a harder airway the expert's own press lies nearer that floor, so "
-        "the novice overshoots less (the ratio of peak tongue forces above). The parts, group by group (means):\n",
+        "the novice overshoots less (the ratio of peak tongue forces above); where the airway has lower incisors, "
+        "they take a harder press than the expert's (the jaw, not the tongue, is squeezed), and the teeth part, not "
+        "safety, pays for it. The parts, group by group (means):\n",
         "| grade | group | " + " | ".join(PARTS) + " |", "|---|---|" + "---|" * len(PARTS),
         *[f"| {k} | {g} | " + " | ".join(f"{result['parts'][k][g][p]:.2f}" for p in PARTS) + " |"
           for k in grades for g in GROUPS], "",
