@@ -2,7 +2,7 @@
 (each with its own lower incisors, where it has them), and where levering on the upper incisors would take the
 blade; and how lower incisors at other gaps change that.
 
-    python scripts/incisor_reach.py --out results [--step-deg 0.5] [--gaps 40 34 32 30 28 26]
+    python scripts/incisor_reach.py --out results [--step-deg 0.5] [--gaps 40 35 34 33 32 30 28 26]
 
 For each grade of SoftSphereAirway-v0, at its family's centre force ``P*`` (softenv.airway):
 
@@ -19,8 +19,8 @@ The blade's flange sits under the incisors and lifting moves it away from them, 
 never needs the teeth; the lever reaches at most a little deeper, and where the neck's limit stops it, not
 that far. Then, with lower incisors under the blade (``airway.interincisal_gap`` at each of ``--gaps``, mm):
 
-* **lifting** toward the centre target: whether it reaches it, the tongue's force at the end and the jaw's
-  peak force;
+* **lifting** toward the centre target: whether it reaches it, the tongue's force at the end, the jaw's
+  peak force and how close the hand came to its workspace's floor;
 * **levering** as above: the force it holds, the teeth's and the jaw's force there.
 
 Writes ``incisor_reach.md`` and ``incisor_reach.json`` into ``--out``.
@@ -45,7 +45,7 @@ from softenv.devices.laryngoscope.control import HandController
 from softenv.devices.laryngoscope.params import INCISOR_RADIUS, LaryngoscopeParams
 from softenv.devices.laryngoscope.physics import hand_action
 from softenv.envs import airway_scene
-from softenv.training.hand import haptic_config, reach_env
+from softenv.training.hand import haptic_config, reach_env, relative_hand_pose, workspace
 
 LEVER_GAIN = 0.025          # rad/s of turn per newton of normal-force error
 HORIZON = 250               # control periods an attempt runs (5 s)
@@ -93,16 +93,20 @@ def _start(grade: int, insertion_deg: float, gap: float | None = None) -> tuple[
 
 def lift(grade: int, insertion_deg: float, gap: float | None = None) -> dict[str, Any]:
     """The expert's controller toward the centre target at ``insertion_deg``: reached, the teeth's and the jaw's
-    peak force, the tongue's force at the end."""
+    peak force, the tongue's force at the end, and how far above its workspace's floor the hand came lowest (mm;
+    0: it pressed as deep as the hand may go, so nobody could press harder)."""
     env, obs, target, controller, device = _start(grade, insertion_deg, gap)
+    floor = workspace(env.world.config)[0][1]
     teeth = jaw = 0.0
+    lowest = math.inf
     for _ in range(HORIZON):
         obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
         teeth = max(teeth, info["incisor_force_N"])
         jaw = max(jaw, float(env.device.laryngoscope.jaw_force))
+        lowest = min(lowest, float(relative_hand_pose(env)[1]))
     return {"insertion_deg": insertion_deg, "reached": bool(info["is_success"]), "peak_incisor_N": teeth,
             "peak_jaw_N": jaw, "tongue_N": float(env.device.laryngoscope.normal_force),
-            "shape_error_mm": info["shape_error_mm"]}
+            "shape_error_mm": info["shape_error_mm"], "above_floor_mm": (lowest - floor) * 1e3}
 
 
 def lever(grade: int, gap: float | None = None, held: int = 50) -> dict[str, Any]:
@@ -153,7 +157,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("results"))
     parser.add_argument("--step-deg", type=float, default=0.5)
-    parser.add_argument("--gaps", type=float, nargs="+", default=[40.0, 34.0, 32.0, 30.0, 28.0, 26.0],
+    parser.add_argument("--gaps", type=float, nargs="+", default=[40.0, 35.0, 34.0, 33.0, 32.0, 30.0, 28.0, 26.0],
                         help="interincisal gaps (mm) to try on every grade")
     args = parser.parse_args()
     rows = []
@@ -218,8 +222,8 @@ def report(rows: list[dict[str, Any]], made: dict[str, Any]) -> str:
               "plus the pitch), and at a given pitch pressing into the tongue moves the flange away from the upper "
               "incisors: no press that reaches a view short of the lift's deepest loads them, so an expert who lifts "
               "has no reason to. The lower incisors of the restricted mouth openings"
-              + "".join(f" (grade {r['grade']}: {r['lift']['centre']['peak_jaw_N']:.1f} N at the centre)"
-                        for r in rows if r["interincisal_gap_mm"] is not None)
+              + " (" + ", ".join(f"grade {r['grade']}: {r['lift']['centre']['peak_jaw_N']:.1f} N at the centre"
+                                 for r in rows if r["interincisal_gap_mm"] is not None) + ")"
               + " take part of the lift's push where the view is shallow, and are left behind as the blade pitches "
               "tip-down for deeper views.", "",
               "## With lower incisors", "",
@@ -228,19 +232,23 @@ def report(rows: list[dict[str, Any]], made: dict[str, Any]) -> str:
               f"{LaryngoscopeParams.flange_height * 1e3:g} mm: how far under the blade's underside they start). The jaw "
               f"yields as a 10 kN/m spring.", "",
               "| grade | gap (mm) | clearance (mm) | lift: reached | lift: tongue at the end (N) | lift: jaw peak (N) | "
-              "lever: force held (N) | lever: teeth (N) | lever: jaw (N) |", "|---|---|---|---|---|---|---|---|---|"]
+              "lift: hand above its floor, lowest (mm) | lever: force held (N) | lever: teeth (N) | lever: jaw (N) |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for j in r["jaw"]:
             li, lev = j["lift"], j["lever"]
             force = f"{lev['held_N']:.1f}" + (" (neck limit)" if lev["at_neck_limit"] else "")
             lines.append(f"| {r['grade']} | {j['gap_mm']:g} | {j['clearance_mm']:g} | {'yes' if li['reached'] else 'no'} | "
-                         f"{li['tongue_N']:.1f} | {li['peak_jaw_N']:.1f} | {force} | {lev['incisor_N']:.1f} | "
+                         f"{li['tongue_N']:.1f} | {li['peak_jaw_N']:.1f} | {li['above_floor_mm']:.1f} | {force} | "
+                         f"{lev['incisor_N']:.1f} | "
                          f"{lev['jaw_N']:.1f} |")
     stopped = {r["grade"]: max((j["gap_mm"] for j in r["jaw"] if not j["lift"]["reached"]), default=None) for r in rows}
     lines += ["", "Widest gap at which the lift no longer reaches the centre: "
               + ", ".join(f"grade {g}: {'none tried' if v is None else f'{v:g} mm'}" for g, v in stopped.items())
               + ". Where the lift stops on the jaw, the tongue's force stalls below the target's and the jaw carries "
-              "the rest of the hand's push; only turning the blade on the teeth takes the tongue further.", ""]
+              "the rest of the hand's push; only turning the blade on the teeth takes the tongue further. Where the "
+              "hand comes down to its floor (0 mm above it), the lift holds the centre only because the hand presses "
+              "as deep as it may: a harder press is impossible there.", ""]
     return "\n".join(lines)
 
 
