@@ -204,6 +204,17 @@ def test_a_graded_log_records_its_airway_and_scores_against_that_grades_expert(t
     assert main(["score", str(path), "--grade", "1"]) == 2            # a grade that contradicts the log's own
 
 
+@pytest.mark.parametrize("grade", [3, 4])
+def test_the_restricted_openings_gap_is_the_narrowest_the_lift_reaches_with_the_hand_free_to_press_harder(grade):
+    """docs/airways.md's choice of grades 3 and 4's interincisal gaps: at the grade's own, the expert's lift reaches the
+    centre with the jaw loaded and the hand above its workspace's floor; 1 mm narrower, the hand needs the floor's
+    whole depth (no trainee could press harder than the expert)."""
+    gap, insertion = GRADES[grade][6], incisor_reach.centre(grade)[0]
+    own, narrower = incisor_reach.lift(grade, insertion), incisor_reach.lift(grade, insertion, gap - 1.0)
+    assert own["reached"] and own["peak_jaw_N"] > 3.0 and own["above_floor_mm"] > 1.0
+    assert narrower["above_floor_mm"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_pressing_harder_than_the_lift_needs_costs_the_teeth_part_where_there_are_lower_incisors():
     """On grade 3 the expert's own lift rests the blade on the lower incisors at no cost to its teeth part; a trainee
     who presses 3 mm deeper squeezes the jaw beyond the expert's force, and the teeth part loses that excess over
