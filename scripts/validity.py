@@ -333,7 +333,7 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         "openings (the expert group's peak jaw force above), but its upper-incisor force is 0 on every grade: the "
         "view fixes the blade's pitch, and at the family's centre no press that reaches the view brings the flange up "
         "into the upper teeth (docs/airways.md). The rise on the upper teeth appears only in trainees who lever, "
-        "whose teeth part falls; the score's teeth part reads the upper incisors only.\n",
+        "whose teeth part falls; the lower incisors cost the teeth part only beyond the grade's expert's force.\n",
         "- **Relations to other variables** beyond difficulty (global rating scales, checklists, success and "
         "time on patients) need real trainees scored both ways.\n",
         "- **Consequences** here are rates among synthetic groups; the real ones (who is held back, who is "
