@@ -169,7 +169,7 @@ def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():
 
 def test_lower_incisors_stop_the_lift_short_and_the_lever_on_the_teeth_reaches_past_them():
     """What closer lower incisors would make of grade 3 (scripts/incisor_reach.py's jaw table, docs/airways.md):
-    30 mm between the incisal edges (grade 3's own are 34 mm apart), the expert's lift stalls on the jaw with the tongue short of the centre's
+    30 mm between the incisal edges (grade 3's own are 35 mm apart), the expert's lift stalls on the jaw with the tongue short of the centre's
     force, the jaw carrying the rest; turned about the upper incisal edge, the blade holds that force and
     loads the teeth with tens of newtons. 40 mm apart, the lift reaches the centre as without them."""
     force = incisor_reach.centre(3)[1]
