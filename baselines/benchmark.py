@@ -499,14 +499,14 @@ def format_compact(summaries: list[dict[str, Any]]) -> str:
 
 
 CLINICAL_HEADER = ["scene", "policy", "peak tongue force (N)", "tongue force-time (N s)", "peak incisor force (N)",
-                   "incisor contact (s)", "lever share", "hand path (m)", "SPARC", "LDLJ", "glottic view (%)"]
+                   "peak lower-incisor force (N)", "incisor contact (s)", "lever share", "hand path (m)", "SPARC", "LDLJ", "glottic view (%)"]
 
 
 def format_clinical(summaries: list[dict[str, Any]]) -> str:
     """The clinical metrics (means [95 % interval]) of the cells that have them: the laryngoscope scenes."""
-    keys = ("peak_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N", "incisor_contact_s", "lever_share",
-            "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
-    digits = (1, 1, 2, 2, 2, 3, 2, 1, 1)
+    keys = ("peak_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N", "peak_jaw_force_N", "incisor_contact_s",
+            "lever_share", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
+    digits = (1, 1, 2, 2, 2, 2, 3, 2, 1, 1)
     lines = ["| " + " | ".join(CLINICAL_HEADER) + " |", "|" + "---|" * len(CLINICAL_HEADER)]
     for s in summaries:
         if CLINICAL[0] in s:

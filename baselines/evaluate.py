@@ -26,7 +26,7 @@ TRAIN_SPLIT = "train"          # the targets agents train on, and offline datase
 METRICS = ("final_error_mm", "success", "normalized_score", "steps_to_success", "peak_force_N")
 # the laryngoscope scenes' clinical metrics (softenv.devices.laryngoscope.clinical), from info["clinical"] at each episode's end
 CLINICAL = ("peak_tongue_force_N", "mean_tongue_force_N", "tongue_force_time_Ns", "peak_incisor_force_N",
-            "incisor_contact_s", "lever_share", "duration_s", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
+            "peak_jaw_force_N", "incisor_contact_s", "lever_share", "duration_s", "hand_path_m", "sparc", "ldlj", "glottic_view_pct")
 
 # benchmark scenes: name -> (env id, scene overrides); nonlinear variants where the law matters, and the
 # default scene on the finite-element tongue (its shipped data)

@@ -17,7 +17,7 @@ The sources of evidence assessment research asks for (Messick 1989; Kane 2013; C
    whose tremor (its phase and amplitude) and hesitation are drawn afresh (each amplitude times a factor
    in [0.75, 1.25], a stated choice for day-to-day variation) while the habits of technique (levering,
    overshoot, direction) stay the trainee's own: ICC(2,1), two-way random, absolute agreement (pingouin).
-4. **Relations to other variables: difficulty.** Scores and forces against grade, beside Davis et al.
+4. **Relations to other variables: difficulty.** Scores, forces and the expert group's time against grade, beside Davis et al.
    2023's manikin settings (normal, restricted neck extension, restricted jaw opening, both), point by
    point in direction and, where the study gives numbers, magnitude.
 5. **Consequences.** The contrasting-groups pass mark on each grade (softenv.skills.passmark.crossing of
@@ -51,7 +51,7 @@ from softenv.envs import airway_scene  # noqa: E402
 from softenv.skills.passmark import crossing, group_amounts, profile_amounts  # noqa: E402
 from softenv.training.hand import hand_limits, haptic_config  # noqa: E402
 from softenv.training.scoring import HAND_WEIGHTS, replay_hand, score_hand_log  # noqa: E402
-from softenv.training.trainee import degrade, expert_hand_log, skill_population  # noqa: E402
+from softenv.training.trainee import FORCE_RATE, degrade, expert_hand_log, skill_population  # noqa: E402
 
 GROUPS = ("expert", "intermediate", "novice")
 PARTS = tuple(HAND_WEIGHTS)
@@ -59,6 +59,9 @@ LBF = 4.4482216152605                      # N per pound-force
 # Davis et al. 2023 (Cureus 15:e41611): the rise from the normal setting to the most restricted one
 DAVIS_2023 = {"incisor": {"students": (6.95, 1.29), "residents": (5.93, 0.98), "staff": (5.94, 0.70)},
               "tongue base": {"students": (0.37, 0.18), "residents": (0.46, 0.14), "staff": (0.73, 0.15)}}
+# Yu et al. 2025 (BMC Med Educ, doi:10.1186/s12909-025-07413-2): intubation time (s, mean and SD) on the manikin
+# scored most difficult, and the means on the other three
+YU_2025 = {"hardest": (58.84, 22.63), "others": (42.67, 48.73, 50.22)}
 DAY_TO_DAY = (0.75, 1.25)                  # a session's tremor and hesitation amplitude over the trainee's own
 
 
@@ -75,7 +78,8 @@ def members(grade: int, n: int, seed: int) -> list[dict[str, Any]]:
             rows.append({"grade": grade, "group": group, **{k: parts[k] for k in (*PARTS, "score")},
                          "peak_tongue_N": trainee.clinical["peak_tongue_force_N"],
                          "peak_incisor_N": trainee.clinical["peak_incisor_force_N"],
-                         "peak_jaw_N": trainee.clinical["peak_jaw_force_N"]})
+                         "peak_jaw_N": trainee.clinical["peak_jaw_force_N"],
+                         "time_to_target_s": np.nan if trainee.time_to_target_s is None else trainee.time_to_target_s})
     return rows
 
 
@@ -131,6 +135,7 @@ def analyse(known: pd.DataFrame, sessions: pd.DataFrame, seed: int) -> dict[str,
             **{f"{g}_peak_tongue_N": float(rows[rows.group == g]["peak_tongue_N"].mean()) for g in GROUPS},
             **{f"{g}_peak_incisor_N": float(rows[rows.group == g]["peak_incisor_N"].mean()) for g in GROUPS},
             **{f"{g}_peak_jaw_N": float(rows[rows.group == g]["peak_jaw_N"].mean()) for g in GROUPS},
+            **{f"{g}_time_to_target_s": float(rows[rows.group == g]["time_to_target_s"].mean()) for g in GROUPS},
             "population_peak_incisor_N": float(pop["peak_incisor_N"].mean()),
             "population_teeth_touched": float(np.mean(pop["peak_incisor_N"] > 0.0)),
             "population_score": float(pop["score"].mean())}
@@ -156,10 +161,12 @@ def analyse(known: pd.DataFrame, sessions: pd.DataFrame, seed: int) -> dict[str,
     out["retest_within_level"] = {int(level): icc(sessions[sessions.level == level])
                                   for level in sorted(sessions["level"].unique()) if level > 0}
     tongue = [out["difficulty"][g]["expert_peak_tongue_N"] for g in grades]
+    times = [out["difficulty"][g]["expert_time_to_target_s"] for g in grades]
     out["spearman_grade"] = {
         "population_score": float(pg.corr(sessions[sessions.session == 1]["grade"], sessions[sessions.session == 1]["score"],
                                           method="spearman")["r"].iloc[0]),
-        "expert_peak_tongue_N": float(pd.Series(grades).corr(pd.Series(tongue), method="spearman"))}
+        "expert_peak_tongue_N": float(pd.Series(grades).corr(pd.Series(tongue), method="spearman")),
+        "expert_time_to_target_s": float(pd.Series(grades).corr(pd.Series(times), method="spearman"))}
     return out
 
 
@@ -224,7 +231,9 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
     corr = np.array(result["internal"]["spearman"])
     rt = result["retest"]
     rise = {k: d[last][f"{k}"] - d[first][f"{k}"] for k in ("expert_peak_tongue_N", "novice_peak_tongue_N",
-                                                             "population_peak_incisor_N", "expert_peak_jaw_N")}
+                                                             "population_peak_incisor_N", "expert_peak_jaw_N",
+                                                             "expert_time_to_target_s")}
+    slower = d[last]["expert_time_to_target_s"] / d[first]["expert_time_to_target_s"]
     davis = lambda kind, who: DAVIS_2023[kind][who][0] * LBF  # noqa: E731
     lines = [
         "# The trainee score's validity argument across airway grades\n",
@@ -268,17 +277,21 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         *[f"| {level / 4:.2f} | {r['trainees']} | {r['icc']:.2f} [{r['low']:.2f}, {r['high']:.2f}] |"
           for level, r in result["retest_within_level"].items()], "",
         "## 4. Relations to difficulty\n",
-        "Means over each group's members (first sessions for the population). Peak forces in N.\n",
+        "Means over each group's members (first sessions for the population; times over the members who reach "
+        "the target). Peak forces in N.\n",
         "| grade | expert group: peak tongue | novice group: peak tongue (over the expert group's) | expert group: "
-        "peak incisor | expert group: peak jaw (lower incisors) | population: peak incisor | population: teeth "
-        "touched | population: score | expert group: score |", "|---|---|---|---|---|---|---|---|---|",
+        "peak incisor | expert group: peak jaw (lower incisors) | expert group: time to target (s) | population: "
+        "peak incisor | population: teeth touched | population: score | expert group: score |",
+        "|---|---|---|---|---|---|---|---|---|---|",
         *[f"| {k} | {d[k]['expert_peak_tongue_N']:.1f} | {d[k]['novice_peak_tongue_N']:.1f} "
           f"({d[k]['novice_peak_tongue_N'] / d[k]['expert_peak_tongue_N']:.2f}) | "
-          f"{d[k]['expert_peak_incisor_N']:.1f} | {d[k]['expert_peak_jaw_N']:.1f} | {d[k]['population_peak_incisor_N']:.1f} | "
+          f"{d[k]['expert_peak_incisor_N']:.1f} | {d[k]['expert_peak_jaw_N']:.1f} | {d[k]['expert_time_to_target_s']:.2f} | "
+          f"{d[k]['population_peak_incisor_N']:.1f} | "
           f"{d[k]['population_teeth_touched']:.0%} | {d[k]['population_score']:.1f} | {kg[k]['expert'][0]:.1f} |"
           for k in grades], "",
         f"Spearman's rho between grade and the population's score: {result['spearman_grade']['population_score']:.2f}; "
-        f"between grade and the expert group's peak tongue force: {result['spearman_grade']['expert_peak_tongue_N']:.2f}.\n",
+        f"between grade and the expert group's peak tongue force: {result['spearman_grade']['expert_peak_tongue_N']:.2f}; "
+        f"between grade and the expert group's time to target: {result['spearman_grade']['expert_time_to_target_s']:.2f}.\n",
         f"Against Davis et al. 2023 (difficult-airway manikin, Miller 3; settings 1 normal, 2 restricted neck "
         "extension, 3 restricted jaw opening, 4 both; the rise from setting 1 to setting 4, mean (SE)), point by "
         f"point with grade {first} to grade {last} here:\n",
@@ -293,6 +306,16 @@ def report(result: dict[str, Any], command: str, seconds: float, args: argparse.
         f"+{rise['expert_peak_jaw_N']:.1f} N; graded-skill population: upper +{rise['population_peak_incisor_N']:.1f} N | "
         f"{'rises on the lower incisors for every group, on the upper only for the trainees who lever' if rise['expert_peak_jaw_N'] > 0 and rise['population_peak_incisor_N'] > 0 else '**does not rise**'} |",
         "",
+        f"Time, against Yu et al. 2025 (BMC Med Educ, doi:10.1186/s12909-025-07413-2; 19 trainees on four manikins): "
+        f"intubation took longest on the manikin scored most difficult, {YU_2025['hardest'][0]:g} +/- "
+        f"{YU_2025['hardest'][1]:g} s against {min(YU_2025['others']):g}-{max(YU_2025['others']):g} s on the other "
+        f"three ({YU_2025['hardest'][0] / min(YU_2025['others']):.2f} times the quickest). Here the expert group's "
+        f"time to target goes {d[first]['expert_time_to_target_s']:.2f} -> {d[last]['expert_time_to_target_s']:.2f} s "
+        f"from grade {first} to grade {last} ({slower:.2f} times): "
+        f"{'rises, as published' if rise['expert_time_to_target_s'] > 0 else '**does not rise**'}. Only the lift is "
+        "timed (insertion to the target's shape; no tube is passed), and it rises because the expert's lift builds "
+        f"force at a bounded rate ({FORCE_RATE:g} N/s, `softenv.training.trainee.FORCE_RATE`) and a harder grade needs "
+        "more force.\n",
         f"From grade {first} to grade {last} the mean score "
         + "; ".join(f"of the {g} group goes {kg[first][g][0]:.1f} -> {kg[last][g][0]:.1f} "
                     f"({'falls' if kg[last][g][0] < kg[first][g][0] else 'does not fall'})" for g in GROUPS)

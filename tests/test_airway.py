@@ -132,13 +132,14 @@ def test_the_neck_extension_bounds_the_blades_pitch(grade):
     assert env.device.laryngoscope.hand_pose[2] == pytest.approx(GRADES[grade][2], abs=1e-12)
 
 
-def test_the_expert_succeeds_on_every_grade_with_its_forces_rising_and_its_upper_teeth_untouched():
+def test_the_expert_succeeds_on_every_grade_with_its_forces_and_time_rising_and_its_upper_teeth_untouched():
     """The published direction (Davis et al. 2023: tongue-base force rises from the normal to the most
     restricted setting, for every group). The scripted expert lifts along the handle, so it never loads the
     upper teeth on any grade (docs/airways.md says why no technique can at the family's centre); on the
     restricted mouth openings (grades 3 and 4) its lift presses the blade onto the lower incisors, so the
-    force on the teeth rises from none to some there."""
-    peaks, jaw = [], []
+    force on the teeth rises from none to some there. Its lift builds force at a bounded rate, so the
+    harder airway, which needs more force, takes longer."""
+    peaks, jaw, times = [], [], []
     for grade in GRADES:
         config = haptic_config(airway_scene(grade))
         r = replay_hand(expert_hand_log(config), config)
@@ -146,8 +147,28 @@ def test_the_expert_succeeds_on_every_grade_with_its_forces_rising_and_its_upper
         assert r.clinical["peak_incisor_force_N"] == 0.0
         peaks.append(r.clinical["peak_tongue_force_N"])
         jaw.append(r.clinical["peak_jaw_force_N"])
+        times.append(r.time_to_target_s)
     assert all(b > a + 2.0 for a, b in zip(peaks, peaks[1:])), peaks
     assert jaw[0] == jaw[1] == 0.0 and min(jaw[2:]) > 3.0, jaw
+    assert all(b > a + 0.05 for a, b in zip(times, times[1:])), times
+
+
+@pytest.mark.parametrize("grade", [1, 4])
+def test_the_experts_lift_takes_at_least_the_force_over_its_rate(grade):
+    """The force the lift tracks rises at ``force_rate`` from the blade's first touch, so the target's shape
+    (nearly its whole force) comes no sooner than that force over the rate; twice the rate is sooner, and an
+    unbounded one (the controller's own proportional law) sooner still."""
+    config = haptic_config(airway_scene(grade))
+    times = {}
+    for rate in (20.0, 40.0, None):
+        r = replay_hand(expert_hand_log(config, force_rate=rate), config)
+        assert r.time_to_target_s is not None
+        times[rate] = r.time_to_target_s
+        if rate is not None:
+            assert r.time_to_target_s >= 0.8 * r.clinical["peak_tongue_force_N"] / rate, (rate, r.time_to_target_s)
+    assert times[20.0] > times[40.0] > times[None], times
+    with pytest.raises(ValueError, match=r"force_rate.*\[1, 10000\]"):
+        expert_hand_log(config, force_rate=0.0)
 
 
 def test_lifting_reaches_as_deep_a_view_as_the_lever_with_the_teeth_untouched():

@@ -40,4 +40,6 @@ def test_the_validity_argument_reports_every_source_of_evidence_on_each_grade(tm
     assert all(correlations[i][i] == 1.0 for i in range(len(correlations)))
     d = result["difficulty"]
     assert d["4"]["expert_peak_tongue_N"] > d["1"]["expert_peak_tongue_N"]   # the published direction
+    assert d["4"]["expert_time_to_target_s"] > d["1"]["expert_time_to_target_s"]          # Yu et al. 2025's
+    assert "Yu et al. 2025" in text and "expert group: time to target (s)" in text
     assert result["commit"] and "scripts/validity.py" in result["command"]

@@ -2,7 +2,9 @@
 
 :func:`expert_hand_log` runs :class:`softenv.devices.laryngoscope.control.HandController` (insert, lift along the handle,
 sweep right) toward the scene's family-centre target and records the hand's pose every control
-period, as a haptic device would (the :data:`softenv.training.logs.HAND_LOG` schema). :func:`degrade` adds
+period, as a haptic device would (the :data:`softenv.training.logs.HAND_LOG` schema). Its lift builds the
+tongue's force at :data:`FORCE_RATE`, as a hand does, not at once: a harder airway, which needs more
+force, takes the expert longer. :func:`degrade` adds
 the errors a trainee makes, each by an amount that grades it (0 = none):
 
 | error | amount | what the hand does |
@@ -33,15 +35,21 @@ from .logs import HAND_LOG, Schema, check_table
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
 LEVER_FULL_RAD, LEVER_RISE_M = 0.3, 0.005   # from this lever on, the hand no longer presses down but rises
+FORCE_RATE = 20.0       # N/s: how fast the expert's lift builds the tongue's force (a stated choice, docs/airways.md)
 # the largest amount of each error degrade() takes
 LIMITS = {"tremor": 5.0, "hesitation": 60.0, "lever": 0.5, "overshoot": 50.0, "direction": 1.0}
 
 
-def expert_hand_log(config: SceneConfig | None = None, duration_s: float = 5.0) -> np.ndarray:
+def expert_hand_log(config: SceneConfig | None = None, duration_s: float = 5.0,
+                    force_rate: float | None = FORCE_RATE) -> np.ndarray:
     """The scripted expert's hand log ``(n, 5)`` (``time_s`` and the relative hand pose) toward the
     centre of the scene's laryngoscopy family (``config``: made by :func:`~softenv.training.hand.haptic_config`;
-    None: SoftSphereHaptic-v0's)."""
+    None: SoftSphereHaptic-v0's). From the step the blade first rests on the tongue, the force the
+    controller tracks rises from the tongue's force at ``force_rate`` (N/s) to the target's, its sideways
+    force in proportion (``None``: the target's at once)."""
     check_real(duration_s, "duration_s", 0.1, 600.0)
+    if force_rate is not None:
+        check_real(force_rate, "force_rate", 1.0, 1e4)
     config = hand_config(config)
     dt = config["dynamics"]["dt"]
     steps = max(1, int(round(duration_s / dt)))
@@ -52,8 +60,16 @@ def expert_hand_log(config: SceneConfig | None = None, duration_s: float = 5.0) 
     obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
     device = slice(2 * world.k, 2 * world.k + world.device_obs_size)
     poses = [relative_hand_pose(env)]
+    lift: float | None = None                    # the normal force the lift tracks, once the blade rests on the tongue
     for _ in range(steps):
-        obs, *_ = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))
+        force = float(env.device.laryngoscope.tongue_force)
+        if lift is None and force > 0.0 and force_rate is not None:
+            lift = force
+        goal = target
+        if lift is not None and target[2] > 0.0:
+            lift = min(lift + force_rate * dt, float(target[2]))
+            goal = np.concatenate([target[:2], target[2:] * (lift / target[2])])
+        obs, *_ = env.step(controller.act(obs[None, device], goal[None])[0].astype(np.float32))
         poses.append(relative_hand_pose(env))
     return np.column_stack([np.arange(steps + 1) * dt, np.array(poses)])
 
