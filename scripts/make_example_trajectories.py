@@ -18,7 +18,7 @@ from softenv.training.trainee import degrade, expert_hand_log
 
 STYLES = ("expert", "too_forceful", "wrong_direction")
 DEVICE_LOGS = {"expert": {}, "levers_on_teeth": {"lever": 0.3}, "too_forceful": {"overshoot": 8.0},
-               "hesitant_tremulous": {"hesitation": 0.4, "tremor": 0.6}, "wrong_direction": {"direction": 1.0}}
+               "hesitant_tremulous": {"hesitation": 0.8, "tremor": 0.6}, "wrong_direction": {"direction": 1.0}}
 
 
 def main() -> None:

@@ -19,7 +19,7 @@ NOISE = {"tongue_force_N": 0.3, "blade_z_mm": 0.1}
 @pytest.fixture(scope="module")
 def sessions():
     config = haptic_config(None)
-    log = expert_hand_log(config, duration_s=1.6)
+    log = expert_hand_log(config, duration_s=1.6, force_rate=None)    # the whole press within the short log
     actions = np.stack([log_actions(degrade(log, config, tremor=0.5, seed=s), config) for s in range(2)], axis=1)
     return config, actions
 

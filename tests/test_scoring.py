@@ -173,9 +173,9 @@ def test_points_to_gain_are_the_score_with_one_part_as_good_as_the_experts():
     assert "12 N" in improvements(report)[1] and improvements(report, 1) == [ADVICE["accuracy"]]
 
 
-def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it(expert_log):
-    """The expert's log was recorded from a controller driving the env; replayed (closed loop on the
-    hand pose) it gives the same shape error at every step."""
+def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it():
+    """The expert's log (its lift unbounded in rate: the controller alone) was recorded from a controller
+    driving the env; replayed (closed loop on the hand pose) it gives the same shape error at every step."""
     import gymnasium as gym
 
     from softenv.devices.laryngoscope.control import HandController
@@ -185,6 +185,7 @@ def test_replaying_a_recorded_hand_reproduces_the_run_that_recorded_it(expert_lo
     target = (world.family.low + world.family.high) / 2
     obs, _ = env.reset(seed=0, options={"target": world.force_box.normalised(target)})
     controller, device = HandController(world.config), slice(2 * world.k, 2 * world.k + world.device_obs_size)
+    expert_log = expert_hand_log(force_rate=None)
     errors = []
     for _ in range(len(expert_log) - 1):
         obs, _, _, _, info = env.step(controller.act(obs[None, device], target[None])[0].astype(np.float32))

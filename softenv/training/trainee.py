@@ -12,7 +12,7 @@ the errors a trainee makes, each by an amount that grades it (0 = none):
 | ``tremor`` | mm | an 8 Hz tremor (physiological tremor is 8-12 Hz) of that amplitude in x and z, half of it sideways, and 0.01 rad per mm of pitch |
 | ``hesitation`` | s | three pauses of that length (at 25, 50 and 75 % of the expert's movement), the hand held still |
 | ``lever`` | rad | the press done by turning the blade instead of lowering the hand: the handle turned tip-down by that angle beyond the expert's, the hand's descent cut by its share of 0.3 rad (from 0.3 rad on, the hand rises 5 mm instead). From about 0.25 rad the flange bears on the upper incisors, the fulcrum of a lever that presses the tongue (``lever_share`` near 1) |
-| ``overshoot`` | mm | the lift pressed that much deeper than the expert's |
+| ``overshoot`` | mm | the lift pressed that much deeper than the expert's, growing over 30 % of the log from where the expert's lift is done |
 | ``direction`` | 0-1 | the sideways path mirrored by that share (1: sweeps left instead of right) |
 
 Every degraded log starts at the start pose and stays in the hand's workspace (clipped to it); where
@@ -35,6 +35,7 @@ from .logs import HAND_LOG, Schema, check_table
 TREMOR_HZ = 8.0
 PAUSES = (0.25, 0.5, 0.75)               # where the hesitant trainee stops, as shares of the movement
 LEVER_FULL_RAD, LEVER_RISE_M = 0.3, 0.005   # from this lever on, the hand no longer presses down but rises
+LIFTED, OVERSHOOT_SPAN = 0.98, 0.3    # the lift is done at this share of its descent; an overshoot grows over this share of the log
 FORCE_RATE = 20.0       # N/s: how fast the expert's lift builds the tongue's force (a stated choice, docs/airways.md)
 # the largest amount of each error degrade() takes
 LIMITS = {"tremor": 5.0, "hesitation": 60.0, "lever": 0.5, "overshoot": 50.0, "direction": 1.0}
@@ -98,13 +99,16 @@ def degrade(log: np.ndarray, config: SceneConfig | None = None, tremor: float = 
     pose = log[:, 1:].copy()
     duration = t[-1]
     ramp = lambda a, b: 0.5 - 0.5 * np.cos(np.pi * np.clip((t / duration - a) / (b - a), 0.0, 1.0))  # noqa: E731
-    # lift: the expert's hand goes down (z) between leaving the start and 40 % of the procedure
+    # the expert's lift: its hand goes down (z) until it holds the target's force; an overshoot presses on from
+    # there, so the trainee passes the target's shape when the expert reaches it
+    descent = pose[:, 1] - pose[0, 1]
+    lifted = float(t[np.argmax(descent <= LIFTED * descent.min())] / duration) if descent.min() < 0.0 else 0.0
     pose[:, 3] *= 1.0 - 2.0 * direction
     if lever > 0.0:
         share, pivot = min(1.0, lever / LEVER_FULL_RAD), ramp(0.0, 0.2)
         pose[:, 1] += (share * LEVER_RISE_M * pivot - pose[:, 1]) * share
         pose[:, 2] += lever * pivot
-    pose[:, 1] -= overshoot * 1e-3 * ramp(0.1, 0.4)
+    pose[:, 1] -= overshoot * 1e-3 * ramp(lifted, lifted + OVERSHOOT_SPAN)
     if tremor > 0.0:
         phase = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, 4)
         onset = np.clip(t / 0.25, 0.0, 1.0)                           # from rest, over a quarter second
