@@ -154,6 +154,19 @@ def test_the_expert_succeeds_on_every_grade_with_its_forces_and_time_rising_and_
 
 
 @pytest.mark.parametrize("grade", [1, 4])
+def test_an_overshoot_presses_on_from_where_the_experts_lift_is_done(grade):
+    """Until the expert's lift is done the overshooting trainee's hand is the expert's, so it reaches the
+    target's shape at the same step (the expert's slower lift once overlapped the overshoot's growth, and
+    the overshooter never passed the target); then it presses deeper: more force, a worse final shape."""
+    config = haptic_config(airway_scene(grade))
+    log = expert_hand_log(config)
+    expert, pressed = replay_hand(log, config), replay_hand(degrade(log, config, overshoot=5.0), config)
+    assert expert.time_to_target_s is not None and pressed.time_to_target_s == expert.time_to_target_s
+    assert pressed.clinical["peak_tongue_force_N"] > expert.clinical["peak_tongue_force_N"] + 0.3
+    assert pressed.final_error_mm > expert.final_error_mm
+
+
+@pytest.mark.parametrize("grade", [1, 4])
 def test_the_experts_lift_takes_at_least_the_force_over_its_rate(grade):
     """The force the lift tracks rises at ``force_rate`` from the blade's first touch, so the target's shape
     (nearly its whole force) comes no sooner than that force over the rate; twice the rate is sooner, and an
