@@ -67,7 +67,7 @@ def expert_hand_log(config: SceneConfig | None = None, duration_s: float = 5.0,
         if lift is None and force > 0.0 and force_rate is not None:
             lift = force
         goal = target
-        if lift is not None and target[2] > 0.0:
+        if lift is not None and force_rate is not None and target[2] > 0.0:
             lift = min(lift + force_rate * dt, float(target[2]))
             goal = np.concatenate([target[:2], target[2:] * (lift / target[2])])
         obs, *_ = env.step(controller.act(obs[None, device], goal[None])[0].astype(np.float32))
