@@ -5,10 +5,11 @@ version), so a stale entry is never read; a repeat request is a file read. The d
 ``$SOFTENV_CACHE_DIR`` if set, else ``~/.cache/softenv``. Writes are atomic, so parallel workers
 (async vector envs) can share it.
 
-An entry is built on one thread (BLAS and OpenMP, by threadpoolctl where installed): multi-threaded
-LAPACK and torch round differently, and an entry's bits must not depend on the threads of whichever
-process built it first (docs: how it works). Without threadpoolctl, a process whose thread variables
-are not all 1 builds on its own threads, with a warning.
+An entry is built on one thread (BLAS and OpenMP, by threadpoolctl where installed; torch, whose MKL
+is linked into it out of threadpoolctl's reach, by its own call): multi-threaded LAPACK and torch round
+differently, and an entry's bits must not depend on the threads of whichever process built it first
+(docs: how it works). Without threadpoolctl, a process whose thread variables are not all 1 builds on
+its own threads, with a warning.
 """
 
 from __future__ import annotations
@@ -16,10 +17,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import sys
 import warnings
 import zipfile
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Iterator, TypeVar
 
 from ._artifact import STAMP_MEMBER as _STAMP
 from .parallel import THREAD_VARS
@@ -33,7 +36,8 @@ T = TypeVar("T")
 
 # Bump when the tissue model, sampling or tabulation changes results: every cached entry is rebuilt.
 # 2: entries built on one thread (version 1's could hold the last bits of a multi-threaded build)
-PHYSICS_VERSION = 2
+# 3: torch too (version 2's MLPs trained on MKL_NUM_THREADS threads: other weights where that was not 1)
+PHYSICS_VERSION = 3
 
 
 def cache_dir() -> Path:
@@ -91,14 +95,47 @@ def cached(kind: str, params: dict[str, Any], build: Callable[[], T],
 
 
 def _build_on_one_thread(build: Callable[[], T]) -> T:
-    if threadpool_limits is not None:
-        with threadpool_limits(limits=1):
-            return build()
-    if not all(os.environ.get(name) == "1" for name in THREAD_VARS):
+    if threadpool_limits is None and not all(os.environ.get(name) == "1" for name in THREAD_VARS):
         warnings.warn("building a cache entry on this process's BLAS/OpenMP threads: its last bits depend on "
                       f"them; install threadpoolctl (softenv[rl], [device] or [fem]) or set {', '.join(THREAD_VARS)}"
                       " to 1", RuntimeWarning, stacklevel=3)
-    return build()
+    with _torch_on_one_thread(), (threadpool_limits(limits=1) if threadpool_limits is not None else nullcontext()):
+        return build()
+
+
+@contextmanager
+def _torch_on_one_thread() -> Iterator[None]:
+    """torch on one thread for the block, then back to its threads. torch sets OpenMP's threads from its
+    MKL's on first use, so threadpoolctl's limit alone leaves an L-BFGS-trained MLP on MKL_NUM_THREADS
+    threads; the variables are 1 meanwhile so that a torch first imported inside the block starts on one."""
+    saved = {name: os.environ.get(name) for name in THREAD_VARS}
+    torch = sys.modules.get("torch")
+    threads = torch.get_num_threads() if torch is not None else None
+    os.environ.update({name: "1" for name in THREAD_VARS})
+    if torch is not None:
+        torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+        torch = sys.modules.get("torch")
+        if torch is not None:
+            torch.set_num_threads(threads if threads is not None else _torch_default_threads(saved))
+
+
+def _torch_default_threads(variables: dict[str, str | None]) -> int:
+    """The threads torch takes when it loads under ``variables``, as its MKL counts them: MKL_NUM_THREADS,
+    else OMP_NUM_THREADS, at most the CPUs; else one a CPU."""
+    cpus = os.cpu_count() or 1
+    for name in ("MKL_NUM_THREADS", "OMP_NUM_THREADS"):
+        value = variables.get(name) or ""
+        if value.isdigit() and int(value) > 0:
+            return min(int(value), cpus)
+    return cpus
 
 
 def built_from(path: Path) -> str | None:

@@ -1,3 +1,4 @@
+import os
 import time
 
 import numpy as np
@@ -65,6 +66,47 @@ def test_a_cache_entry_is_built_on_one_thread_whatever_threads_the_caller_runs(t
     assert seen and set(seen) == {1}
 
 
+def test_a_build_runs_a_loaded_torch_and_its_mkl_on_one_thread_and_gives_its_threads_back(tmp_path, monkeypatch):
+    import torch
+
+    from softenv._cache import cached
+
+    monkeypatch.setenv("SOFTENV_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    caller = torch.get_num_threads()
+    torch.set_num_threads(2)                    # torch's MKL is linked into it: threadpoolctl cannot see it
+    try:
+        info = cached("torch-threads", {}, torch.__config__.parallel_info, load=lambda path: None,
+                      save=lambda value, path: np.savez(path, info=value))
+        assert "at::get_num_threads() : 1" in info and "mkl_get_max_threads() : 1" in info
+        assert torch.get_num_threads() == 2 and "mkl_get_max_threads() : 2" in torch.__config__.parallel_info()
+        assert os.environ["MKL_NUM_THREADS"] == "2"                              # the variables given back too
+    finally:
+        torch.set_num_threads(caller)
+
+
+# a process that first imports torch inside a build: torch loads on one thread there, and afterwards takes
+# the threads its variables ask for
+_IMPORT_TORCH_IN_A_BUILD = """
+import sys, numpy as np
+from softenv._cache import cached
+inside = cached("torch-import", {}, lambda: __import__("torch").__config__.parallel_info(), load=lambda path: None,
+                save=lambda value, path: np.savez(path, info=value))
+print("at::get_num_threads() : 1" in inside and "mkl_get_max_threads() : 1" in inside,
+      sys.modules["torch"].get_num_threads())
+"""
+
+
+def test_a_torch_first_imported_in_a_build_runs_on_one_thread_there_and_on_the_asked_threads_after(tmp_path):
+    import subprocess
+    import sys
+
+    env = {**os.environ, "SOFTENV_CACHE_DIR": str(tmp_path), "OMP_NUM_THREADS": "2", "MKL_NUM_THREADS": "2"}
+    done = subprocess.run([sys.executable, "-c", _IMPORT_TORCH_IN_A_BUILD], env=env, check=True,
+                          capture_output=True, text=True)
+    assert done.stdout.split() == ["True", str(min(2, os.cpu_count() or 1))]
+
+
 def test_without_threadpoolctl_an_unpinned_build_warns_and_a_pinned_one_does_not(tmp_path, monkeypatch):
     import warnings
 
@@ -94,7 +136,6 @@ np.savez(sys.argv[1], components=scene.shape_model.components_,
 
 @pytest.mark.slow
 def test_a_scene_built_by_a_two_thread_process_is_the_one_thread_scene_bit_for_bit(tmp_path):
-    import os
     import subprocess
     import sys
 
