@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, TypeVar
 
 from ._artifact import STAMP_MEMBER as _STAMP
-from .parallel import THREAD_VARS
+from .parallel import THREAD_VARS, pin_threads
 
 try:  # in the rl, device and fem extras; the core stays numpy and gymnasium
     from threadpoolctl import threadpool_limits
@@ -111,9 +111,7 @@ def _torch_on_one_thread() -> Iterator[None]:
     saved = {name: os.environ.get(name) for name in THREAD_VARS}
     torch = sys.modules.get("torch")
     threads = torch.get_num_threads() if torch is not None else None
-    os.environ.update({name: "1" for name in THREAD_VARS})
-    if torch is not None:
-        torch.set_num_threads(1)
+    pin_threads()
     try:
         yield
     finally:
